@@ -1,0 +1,91 @@
+#pragma once
+
+#include "cell/bus/idl_types.hpp"
+#include "cell/bus/qos.hpp"
+
+/// Every topic of the cell: its name, its type and its QoS profile, in one place, so a writer
+/// and a reader of a topic cannot disagree.
+namespace cell::bus {
+
+enum class QosProfile { kState, kStream, kReliableStream, kCommand, kRecent, kHeartbeat };
+
+/// A topic's name bound to its IDL type and QoS profile.
+template <IdlType T>
+struct TopicDef {
+  const char* name;
+  QosProfile profile;
+  std::int32_t depth = 8;  ///< history depth for the stream and recent profiles
+};
+
+/// The QoS of a topic definition's profile.
+template <IdlType T>
+Qos make_qos(const TopicDef<T>& def) {
+  switch (def.profile) {
+    case QosProfile::kState:
+      return qos::state();
+    case QosProfile::kStream:
+      return qos::stream(def.depth);
+    case QosProfile::kReliableStream:
+      return qos::reliable_stream(def.depth);
+    case QosProfile::kCommand:
+      return qos::command();
+    case QosProfile::kRecent:
+      return qos::recent(def.depth);
+    case QosProfile::kHeartbeat:
+      return qos::heartbeat();
+  }
+  return qos::command();
+}
+
+namespace topics {
+
+// health.idl
+inline constexpr TopicDef<cell_health_ServiceHeartbeat> kHeartbeat{"cell/health/heartbeat",
+                                                                   QosProfile::kHeartbeat};
+inline constexpr TopicDef<cell_health_CellEvent> kCellEvent{"cell/health/event",
+                                                            QosProfile::kRecent, 100};
+inline constexpr TopicDef<cell_health_PingRequest> kPingRequest{"cell/health/ping",
+                                                                QosProfile::kCommand};
+inline constexpr TopicDef<cell_health_PingReply> kPingReply{"cell/health/pong",
+                                                            QosProfile::kRecent, 32};
+// robot.idl
+inline constexpr TopicDef<cell_robot_RobotState> kRobotState{"cell/robot/state",
+                                                             QosProfile::kStream, 16};
+inline constexpr TopicDef<cell_robot_RobotState> kRobotStateLatest{"cell/robot/state_latest",
+                                                                   QosProfile::kState};
+inline constexpr TopicDef<cell_robot_RobotCommand> kRobotCommand{"cell/robot/command",
+                                                                 QosProfile::kCommand};
+inline constexpr TopicDef<cell_robot_RobotCommandReply> kRobotCommandReply{
+    "cell/robot/command_reply", QosProfile::kRecent, 32};
+// motion.idl
+inline constexpr TopicDef<cell_motion_Trajectory> kTrajectory{"cell/motion/trajectory",
+                                                              QosProfile::kCommand};
+inline constexpr TopicDef<cell_motion_AlterCorrection> kAlter{"cell/motion/alter",
+                                                              QosProfile::kStream, 1};
+inline constexpr TopicDef<cell_motion_MotionRequest> kMotionRequest{"cell/motion/request",
+                                                                    QosProfile::kCommand};
+inline constexpr TopicDef<cell_motion_MotionStatus> kMotionStatus{"cell/motion/status",
+                                                                  QosProfile::kState};
+// vision.idl
+inline constexpr TopicDef<cell_vision_Image> kImage{"cell/vision/image", QosProfile::kStream, 2};
+inline constexpr TopicDef<cell_vision_Detections> kDetections{"cell/vision/detections",
+                                                              QosProfile::kStream, 8};
+inline constexpr TopicDef<cell_vision_EdgeRequest> kEdgeRequest{"cell/vision/edge_request",
+                                                                QosProfile::kCommand};
+inline constexpr TopicDef<cell_vision_EdgeResult> kEdgeResult{"cell/vision/edge_result",
+                                                              QosProfile::kRecent, 32};
+// calibration.idl
+inline constexpr TopicDef<cell_calibration_CameraCalibration> kCameraCalibration{
+    "cell/calibration/camera", QosProfile::kState};
+inline constexpr TopicDef<cell_calibration_BeltCalibration> kBeltCalibration{
+    "cell/calibration/belt", QosProfile::kState};
+// task.idl
+inline constexpr TopicDef<cell_task_JobRequest> kJobRequest{"cell/task/job_request",
+                                                            QosProfile::kCommand};
+inline constexpr TopicDef<cell_task_JobCommand> kJobCommand{"cell/task/job_command",
+                                                            QosProfile::kCommand};
+inline constexpr TopicDef<cell_task_JobStatus> kJobStatus{"cell/task/job_status",
+                                                          QosProfile::kState};
+
+}  // namespace topics
+}  // namespace cell::bus
