@@ -1,8 +1,10 @@
 # Helpers shared by every library, service and test (STYLE.md §10).
 
+# -Wno-maybe-uninitialized: g++ 12 reports false positives inside Eigen fixed-size temporaries.
 function(cell_set_warnings target)
   target_compile_options(${target} PRIVATE
-    $<$<COMPILE_LANGUAGE:CXX>:-Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wno-sign-conversion -Wno-missing-field-initializers>)
+    $<$<COMPILE_LANGUAGE:CXX>:-Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wno-sign-conversion -Wno-missing-field-initializers
+      -Wno-maybe-uninitialized>)
   if(CELL_WERROR)
     target_compile_options(${target} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:-Werror>)
   endif()
@@ -57,4 +59,19 @@ function(cell_add_service svc)
   add_executable(cell-${svc} src/main.cpp)
   target_link_libraries(cell-${svc} PRIVATE cell_${svc}_lib)
   cell_set_warnings(cell-${svc})
+endfunction()
+
+# cell_add_memcheck(<name>): runs <name>_test whole under valgrind memcheck as one ctest entry
+# "<name>.memcheck" (label memcheck); fails on any memory error or definite/indirect leak.
+find_program(CELL_VALGRIND valgrind)
+function(cell_add_memcheck name)
+  if(NOT CELL_VALGRIND)
+    message(WARNING "valgrind not found: ${name}.memcheck not registered")
+    return()
+  endif()
+  add_test(NAME ${name}.memcheck
+           COMMAND ${CELL_VALGRIND} --leak-check=full --errors-for-leak-kinds=definite,indirect
+                   --error-exitcode=9 -q $<TARGET_FILE:${name}_test>)
+  set_tests_properties(${name}.memcheck PROPERTIES LABELS memcheck TIMEOUT 300 ENVIRONMENT
+      "CELL_SOURCE_DIR=${CMAKE_SOURCE_DIR};CELL_BIN_DIR=${CELL_BIN_DIR};CYCLONEDDS_URI=file://${CMAKE_SOURCE_DIR}/config/dds/loopback.xml")
 endfunction()

@@ -1,0 +1,72 @@
+#pragma once
+
+#include <cstdint>
+
+#include <Eigen/Geometry>
+
+#include "cell/common/result.hpp"
+#include "cell/trajectory/alter.hpp"
+#include "cell/trajectory/joint_trajectory.hpp"
+#include "cell/trajectory/planners.hpp"
+
+namespace cell::trajectory {
+
+/// What the executor is doing (V+ STATE(2) semantics for kArrived).
+enum class ExecState : std::uint8_t {
+  kIdle,      ///< nothing loaded
+  kMoving,    ///< following the trajectory
+  kArrived,   ///< "motion stopped at planned location"; still tracking if ALTER is on
+  kFailed,    ///< the altered pose left the workspace; holding the last good setpoint
+};
+
+/// Turns a trajectory (plus ALTER corrections, if enabled) into joint setpoints, one call per
+/// servo cycle. Used by the gateway's servo loop and by the ideal robot that stands in for
+/// it. With ALTER off the setpoint is the trajectory sample. With ALTER on, the nominal tool
+/// pose FK(q(t)) is displaced by the effective correction, blended in with a smoothstep of
+/// the move's time fraction (so a correction that built up before the move began does not
+/// make the path jump), reaching the full correction at the destination; after arrival the
+/// executor keeps the tool on destination + correction(t) (it tracks the moving part) until
+/// alter_off(). Each altered setpoint comes from IK seeded with the previous one.
+/// Not thread-safe; step() is allocation-free when the IK is.
+class TrajectoryExecutor {
+ public:
+  TrajectoryExecutor(ForwardFn forward, InverseFn inverse);
+
+  /// Loads a trajectory starting at time `start_s` (executor clock, seconds).
+  void load(JointTrajectory trajectory, double start_s, bool alter_enabled, AlterMode mode);
+
+  /// Queues an ALTER correction (ignored unless the loaded trajectory enables ALTER).
+  void submit_alter(const AlterCorrection& correction) noexcept;
+
+  /// Ends alter mode (V+ ALTOFF): the robot rests where destination + total correction put it.
+  void alter_off() noexcept;
+
+  /// Computes the setpoint for time `now_s` into `out` (q and qd); call once per cycle.
+  ExecState step(double now_s, JointSample& out);
+
+  /// Stops: the trajectory is dropped and the last setpoint held.
+  void stop() noexcept;
+
+  ExecState state() const noexcept { return state_; }
+  double progress() const noexcept;
+  const JointTrajectory& trajectory() const noexcept { return trajectory_; }
+  /// Why the state is kFailed.
+  const Error& failure() const noexcept { return failure_; }
+
+ private:
+  ForwardFn forward_;
+  InverseFn inverse_;
+  JointTrajectory trajectory_;
+  double start_s_ = 0.0;
+  double last_now_s_ = 0.0;
+  double last_step_s_ = 0.0;
+  bool alter_enabled_ = false;
+  AlterState alter_;
+  ExecState state_ = ExecState::kIdle;
+  JointSample nominal_;
+  JointVector last_q_;
+  bool has_last_ = false;
+  Error failure_;
+};
+
+}  // namespace cell::trajectory

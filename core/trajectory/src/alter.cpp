@@ -1,0 +1,52 @@
+#include "cell/trajectory/alter.hpp"
+
+namespace cell::trajectory {
+
+void AlterState::submit(const AlterCorrection& correction) noexcept {
+  pending_ = correction;  // last one in a cycle wins
+  has_pending_ = true;
+}
+
+void AlterState::begin_cycle() noexcept {
+  if (!has_pending_) {
+    return;
+  }
+  if (mode_.cumulative) {
+    const AlterCorrection base = effective_at(pending_.stamp_s);
+    effective_.translation_mm = base.translation_mm + pending_.translation_mm;
+    effective_.rotation_rad = effective_.rotation_rad + pending_.rotation_rad;
+    effective_.velocity_mm_s = pending_.velocity_mm_s;
+    effective_.stamp_s = pending_.stamp_s;
+  } else {
+    effective_ = pending_;
+  }
+  has_pending_ = false;
+  ++applied_;
+}
+
+AlterCorrection AlterState::effective_at(double now_s) const noexcept {
+  AlterCorrection out = effective_;
+  out.translation_mm += effective_.velocity_mm_s * (now_s - effective_.stamp_s);
+  out.stamp_s = now_s;
+  return out;
+}
+
+Eigen::Isometry3d AlterState::apply(const Eigen::Isometry3d& base_T_tool,
+                                    const AlterCorrection& correction) const noexcept {
+  const Eigen::Matrix3d rotation =
+      (Eigen::AngleAxisd(correction.rotation_rad.z(), Eigen::Vector3d::UnitZ()) *
+       Eigen::AngleAxisd(correction.rotation_rad.y(), Eigen::Vector3d::UnitY()) *
+       Eigen::AngleAxisd(correction.rotation_rad.x(), Eigen::Vector3d::UnitX()))
+          .toRotationMatrix();
+  Eigen::Isometry3d out = base_T_tool;
+  if (mode_.world_frame) {
+    out.linear() = rotation * base_T_tool.linear();
+    out.translation() = base_T_tool.translation() + correction.translation_mm;
+  } else {
+    out.linear() = base_T_tool.linear() * rotation;
+    out.translation() = base_T_tool.translation() + base_T_tool.linear() * correction.translation_mm;
+  }
+  return out;
+}
+
+}  // namespace cell::trajectory
