@@ -40,8 +40,11 @@ function(cell_add_test name)
   if(NOT ARG_TIMEOUT)
     set(ARG_TIMEOUT 120)
   endif()
-  set(props TIMEOUT ${ARG_TIMEOUT} ENVIRONMENT
-      "CELL_SOURCE_DIR=${CMAKE_SOURCE_DIR};CELL_BIN_DIR=${CELL_BIN_DIR};CYCLONEDDS_URI=file://${CMAKE_SOURCE_DIR}/config/dds/loopback.xml")
+  # gtest_discover_tests flattens PROPERTIES, which splits a list-valued ENVIRONMENT into
+  # separate words: repeat the ENVIRONMENT keyword before each entry so every one survives.
+  set(env "CELL_SOURCE_DIR=${CMAKE_SOURCE_DIR};CELL_BIN_DIR=${CELL_BIN_DIR};CYCLONEDDS_URI=file://${CMAKE_SOURCE_DIR}/config/dds/loopback.xml")
+  string(REPLACE ";" ";ENVIRONMENT;" env "${env}")
+  set(props TIMEOUT ${ARG_TIMEOUT} ENVIRONMENT ${env})
   if(ARG_LABELS)
     list(APPEND props LABELS "${ARG_LABELS}")
   endif()

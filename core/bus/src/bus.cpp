@@ -79,6 +79,9 @@ Qos recent(std::int32_t depth) {
 
 Qos heartbeat(double lease_s) {
   Qos q = state();
+  // No auto-dispose: a writer that loses liveliness leaves its instance NOT_ALIVE_NO_WRITERS
+  // (a dead service), distinct from the explicit dispose of a clean stop.
+  dds_qset_writer_data_lifecycle(q.get(), false);
   dds_qset_liveliness(q.get(), DDS_LIVELINESS_MANUAL_BY_TOPIC,
                       static_cast<dds_duration_t>(lease_s * 1e9));
   return q;

@@ -188,6 +188,38 @@ TEST_F(BusTest, RequesterGetsItsOwnReplyAndTimesOutWithoutServer) {
   EXPECT_THAT(r.error().message, ::testing::HasSubstr("cell/health/ping"));
 }
 
+// Regression: Cyclone 0.10.2 reuses a reader's cached loan with the size of the largest loan
+// ever taken; reads and takes of different batch sizes on one reader overflowed the smaller
+// buffer. Many instances, a read then takes on the same reader.
+TEST_F(BusTest, ReadThenTakeOfManyInstancesOnOneReader) {
+  Topic<cell_robot_RobotState> topic(participant_, topics::kRobotStateLatest);
+  Writer<cell_robot_RobotState> writer(participant_, topic, topics::kRobotStateLatest);
+  Reader<cell_robot_RobotState> reader(participant_, topic, topics::kRobotStateLatest);
+  ASSERT_TRUE(writer.wait_for_readers(1, 5s));
+  const std::vector<double> joints{1.0, 2.0};
+  for (int i = 0; i < 150; ++i) {
+    ASSERT_THAT(writer.write(make_state("robot" + std::to_string(i), joints, "")), IsOk());
+  }
+  std::size_t read = 0;
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        auto n = reader.read_each([](const auto&, const auto&) {});
+        read = n ? *n : 0;
+        return read == 64;  // a read returns one batch
+      },
+      5s));
+  std::size_t taken = 0;
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        auto n = reader.take_each([&](const cell_robot_RobotState& s, const auto&) {
+          EXPECT_EQ(span(s.position_rad_or_mm).size(), 2U);
+        });
+        taken += n ? *n : 0;
+        return taken == 150;
+      },
+      5s));
+}
+
 TEST(Participant, BadDomainIsASetupError) {
   EXPECT_THROW(Participant(9999, "p"), BusError);
   EXPECT_THROW(Participant(1, ""), BusError);

@@ -2,6 +2,8 @@
 
 #include <signal.h>
 
+#include <thread>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -38,9 +40,18 @@ TEST(Child, PassesExtraEnvironment) {
 }
 
 TEST(Child, StopEscalatesToKillWhenTermIsIgnored) {
-  auto child = Child::spawn({.executable = "sh", .args = {"-c", "trap '' TERM; sleep 30"}});
+  auto child =
+      Child::spawn({.executable = "sh", .args = {"-c", "trap '' TERM; echo ready; sleep 30"}});
   ASSERT_TRUE(child);
   const pid_t pid = child->pid();
+  // Signal only once the trap is in place (else SIGTERM may win the race and end the shell).
+  std::string out;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (out.find("ready") == std::string::npos && std::chrono::steady_clock::now() < deadline) {
+    child->read_available(out);
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_NE(out.find("ready"), std::string::npos);
   const auto info = child->stop(std::chrono::milliseconds(300));
   EXPECT_FALSE(info.exited);
   EXPECT_EQ(info.signal, SIGKILL);

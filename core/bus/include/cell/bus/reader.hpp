@@ -54,7 +54,7 @@ class Reader {
     return process<kTakeBatch>(true, DDS_ANY_STATE, fn);
   }
 
-  /// Reads (without removing) at most 256 samples whose states match `mask` (e.g.
+  /// Reads (without removing) at most 64 samples whose states match `mask` (e.g.
   /// DDS_ALIVE_INSTANCE_STATE | DDS_ANY_SAMPLE_STATE | DDS_ANY_VIEW_STATE).
   template <std::invocable<const T&, const dds_sample_info_t&> Fn>
   Result<std::size_t> read_each(Fn&& fn, std::uint32_t mask = DDS_ANY_STATE) {
@@ -105,8 +105,11 @@ class Reader {
   const std::string& topic_name() const noexcept { return topic_name_; }
 
  private:
-  static constexpr std::uint32_t kTakeBatch = 32;   // a take loops until the reader is empty
-  static constexpr std::uint32_t kReadBatch = 256;  // a read returns at most this many samples
+  // One loan size for every loan path: Cyclone 0.10.2 reuses a reader's cached loan and then
+  // fills as many pointers as the largest loan ever taken on that reader, whatever size the
+  // call passes, so mixing sizes on one reader overflows the smaller buffer.
+  static constexpr std::uint32_t kTakeBatch = 64;  // a take loops until the reader is empty
+  static constexpr std::uint32_t kReadBatch = 64;  // a read returns at most this many samples
 
   template <std::uint32_t kBatch, typename Fn>
   Result<std::size_t> process(bool take, std::uint32_t mask, Fn& fn) {

@@ -1,0 +1,42 @@
+#pragma once
+
+#include <functional>
+#include <utility>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "session.hpp"
+
+/// cellctl's command groups. To add one (say `kin`):
+///   1. write src/kin_commands.cpp with `void add_kin_commands(CLI::App& app, Commands& commands)`
+///      that adds the CLI11 subcommands (options bound to state the action captures) and binds
+///      each leaf to its action with commands.add();
+///   2. declare it below and append it to kCommandGroups in session.cpp;
+///   3. add the file to cell_cellctl_lib in CMakeLists.txt and test it in tests/.
+namespace cell::cellctl {
+
+/// What a command does once the command line is parsed and the bus resolved: prints through
+/// the session and returns the exit code. May throw bus::BusError (reported by run()).
+using Action = std::function<int(Session&)>;
+
+/// The actions of the CLI11 tree: which parsed subcommand runs what. Not thread-safe.
+class Commands {
+ public:
+  /// Binds `action` to `subcommand`, a leaf of the tree built on the cellctl app.
+  void add(const CLI::App* subcommand, Action action);
+
+  /// The action of the deepest parsed subcommand under `app`, or nullptr when none has one.
+  const Action* chosen(const CLI::App& app) const;
+
+ private:
+  std::vector<std::pair<const CLI::App*, Action>> actions_;
+};
+
+/// Registers one command group on the cellctl app.
+using Registrar = void (*)(CLI::App& app, Commands& commands);
+
+/// `cellctl ping [--rtt]`: every live service from its heartbeat (and the ping round trip).
+void add_ping_commands(CLI::App& app, Commands& commands);
+
+}  // namespace cell::cellctl
