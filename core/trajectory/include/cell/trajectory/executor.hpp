@@ -48,6 +48,8 @@ class TrajectoryExecutor {
   void stop() noexcept;
 
   ExecState state() const noexcept { return state_; }
+  /// True while ALTER corrections are applied (loaded with ALTER and not yet alter_off()).
+  bool alter_active() const noexcept { return alter_enabled_; }
   double progress() const noexcept;
   const JointTrajectory& trajectory() const noexcept { return trajectory_; }
   /// Why the state is kFailed.

@@ -10,8 +10,9 @@
 
 namespace cell::trajectory {
 
-/// Maximum number of joints of any robot of the cell (SCARA 4, Excalibur 6, headroom).
-inline constexpr int kMaxJoints = 8;
+/// Maximum number of joints of any robot of the cell (SCARA 4, Excalibur 6). Equal to
+/// kinematics::kMaxDof, so both libraries' JointVector are the same type.
+inline constexpr int kMaxJoints = 6;
 
 /// A joint vector in the robot's internal units: radians for revolute joints, millimetres
 /// for prismatic ones. Fixed capacity, so copies never allocate (safe in the 1 kHz loop).
