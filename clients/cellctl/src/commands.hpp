@@ -39,4 +39,13 @@ using Registrar = void (*)(CLI::App& app, Commands& commands);
 /// `cellctl ping [--rtt]`: every live service from its heartbeat (and the ping round trip).
 void add_ping_commands(CLI::App& app, Commands& commands);
 
+/// `cellctl kin fk|ik --robot <id> ...`: kinematics from config/robots/<id>.yaml (no bus).
+void add_kin_commands(CLI::App& app, Commands& commands);
+
+/// `cellctl move joints|pose|line|approach|depart|pick|place|track|stop|alter-off ...`.
+void add_move_commands(CLI::App& app, Commands& commands);
+
+/// `cellctl robot home|open|close|stop|reset|lights|state --robot <id>`.
+void add_robot_commands(CLI::App& app, Commands& commands);
+
 }  // namespace cell::cellctl

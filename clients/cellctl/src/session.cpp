@@ -21,7 +21,8 @@ namespace {
 constexpr std::uint32_t kMaxDomainId = 230;
 
 /// Every command group, in --help order.
-constexpr std::array<Registrar, 1> kCommandGroups = {&add_ping_commands};
+constexpr std::array<Registrar, 4> kCommandGroups = {&add_ping_commands, &add_kin_commands,
+                                                     &add_move_commands, &add_robot_commands};
 
 }  // namespace
 

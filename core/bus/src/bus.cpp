@@ -61,11 +61,12 @@ Qos reliable_stream(std::int32_t depth) {
   return q;
 }
 
-Qos command() {
+Qos command(double lifespan_s) {
   Qos q = make_qos();
   dds_qset_reliability(q.get(), DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
-  dds_qset_durability(q.get(), DDS_DURABILITY_VOLATILE);
+  dds_qset_durability(q.get(), DDS_DURABILITY_TRANSIENT_LOCAL);
   dds_qset_history(q.get(), DDS_HISTORY_KEEP_ALL, 0);
+  dds_qset_lifespan(q.get(), static_cast<dds_duration_t>(lifespan_s * 1e9));
   return q;
 }
 

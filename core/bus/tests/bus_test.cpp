@@ -220,6 +220,34 @@ TEST_F(BusTest, ReadThenTakeOfManyInstancesOnOneReader) {
       5s));
 }
 
+// A command reaches a server discovered a moment after it was written, but not one that
+// appears after its lifespan: a restarted gateway must not replay a stale move.
+TEST_F(BusTest, CommandsReachLateServersWithinTheirLifespanOnly) {
+  Topic<cell_robot_RobotCommand> topic(participant_, topics::kRobotCommand);
+  Writer<cell_robot_RobotCommand> writer(participant_, topic, qos::command(0.5).get());
+  const std::string robot = "ibm7545";
+  cell_robot_RobotCommand c{};
+  c.robot_id = borrow(robot);
+  c.kind = cell_robot_CMD_HOME;
+  ASSERT_THAT(writer.write(c), IsOk());
+  {
+    Participant late(participant_.domain_id(), participant_.partition());
+    Topic<cell_robot_RobotCommand> late_topic(late, topics::kRobotCommand);
+    Reader<cell_robot_RobotCommand> reader(late, late_topic, qos::command(0.5).get());
+    ASSERT_TRUE(reader.wait_for_data(3s));
+    auto got = reader.take_copies();
+    ASSERT_THAT(got, IsOk());
+    ASSERT_EQ(got->size(), 1U);
+    EXPECT_EQ((*got)[0]->kind, cell_robot_CMD_HOME);
+  }
+  std::this_thread::sleep_for(700ms);  // past the 0.5 s lifespan
+  Participant later(participant_.domain_id(), participant_.partition());
+  Topic<cell_robot_RobotCommand> later_topic(later, topics::kRobotCommand);
+  Reader<cell_robot_RobotCommand> reader(later, later_topic, qos::command(0.5).get());
+  ASSERT_TRUE(reader.wait_for_writers(1, 3s));
+  EXPECT_FALSE(reader.wait_for_data(500ms));
+}
+
 TEST(Participant, BadDomainIsASetupError) {
   EXPECT_THROW(Participant(9999, "p"), BusError);
   EXPECT_THROW(Participant(1, ""), BusError);

@@ -19,9 +19,12 @@ Qos stream(std::int32_t depth = 8);
 /// RobotState the monitor plots): RELIABLE + VOLATILE + KEEP_LAST depth.
 Qos reliable_stream(std::int32_t depth = 64);
 
-/// Requests and replies: RELIABLE + VOLATILE + KEEP_ALL. Nothing is dropped; a late joiner
-/// does not see old commands (a restarted gateway must not replay a stale move).
-Qos command();
+/// Requests: RELIABLE + KEEP_ALL + TRANSIENT_LOCAL with a LIFESPAN of `lifespan_s`. Nothing
+/// is dropped, and a server whose reader matches a moment after the request was written (one
+/// of several gateways still being discovered) still receives it; but a request older than
+/// its lifespan expires, so a restarted gateway never replays a stale move. Requesters time out
+/// no sooner than the lifespan, so an expired request has always been reported as failed.
+Qos command(double lifespan_s = 2.0);
 
 /// Recent history: RELIABLE + TRANSIENT_LOCAL + KEEP_LAST depth. For replies (a reply written
 /// just before the replier discovered the requester's reader still reaches it; requesters

@@ -73,7 +73,9 @@ class [[nodiscard]] Result {
     check_value();
     return std::get<0>(storage_);
   }
-  T&& value() && {
+  // Rvalue access returns by value (std::expected returns T&&): `for (x : *make_result())`
+  // then iterates a live object instead of one inside a destroyed temporary.
+  T value() && {
     check_value();
     return std::get<0>(std::move(storage_));
   }
@@ -88,7 +90,7 @@ class [[nodiscard]] Result {
 
   T& operator*() & { return value(); }
   const T& operator*() const& { return value(); }
-  T&& operator*() && { return std::move(*this).value(); }
+  T operator*() && { return std::move(*this).value(); }
   T* operator->() { return &value(); }
   const T* operator->() const { return &value(); }
 

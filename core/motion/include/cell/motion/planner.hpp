@@ -1,0 +1,80 @@
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "cell/common/result.hpp"
+#include "cell/kinematics/robot_model.hpp"
+#include "cell/motion/wire.hpp"
+#include "cell/trajectory/planners.hpp"
+
+namespace cell::motion {
+
+/// Planner settings (config/motion.yaml `planner:` section).
+struct PlannerOptions {
+  trajectory::LinearMoveOptions linear;  ///< straight-line limits (speed_scale is per request)
+  double gripper_dwell_s = 0.5;          ///< hold after a gripper action (thesis: 0.5 s)
+  double default_approach_mm = 30.0;     ///< approach/depart distance when a request gives 0
+  /// Settle time added to each via-point segment (thesis: 0.2 s).
+  double via_settle_s = 0.2;
+};
+
+/// Plans every motion the motion service offers for one robot: from the current joints to a
+/// Plan (trajectory + gripper events + ALTER flags), checked against the robot's joint,
+/// speed and Cartesian limits before anything moves. Errors name the offending step, segment
+/// and joint. Immutable; thread-compatible.
+///
+/// "Above" for approach and depart: a SCARA approaches along the base +z (its tool axis is
+/// vertical); a 6-axis arm along the tool's -z (the approach vector a points into the part,
+/// Paul's n, o, a convention).
+class Planner {
+ public:
+  Planner(kinematics::RobotModel model, PlannerOptions options);
+
+  /// Joint-interpolated move to joints q1.
+  Result<Plan> move_joints(const trajectory::JointVector& q0, const trajectory::JointVector& q1,
+                           double speed_scale) const;
+  /// Joint-interpolated move to a tool pose: IK on `branch` ("" = nearest to q0).
+  Result<Plan> move_pose(const trajectory::JointVector& q0, const Eigen::Isometry3d& base_T_tool,
+                         const std::string& branch, double speed_scale) const;
+  /// Straight line of the tool point (V+ MOVES).
+  Result<Plan> move_linear(const trajectory::JointVector& q0,
+                           const Eigen::Isometry3d& base_T_tool, double speed_scale) const;
+  /// Cubic via-point path (7545 thesis) through the poses in `via` then `target`.
+  Result<Plan> via_path(const trajectory::JointVector& q0,
+                        const std::vector<Eigen::Isometry3d>& via,
+                        const Eigen::Isometry3d& target, double speed_scale) const;
+  /// Joint move to `distance_mm` above `target`.
+  Result<Plan> approach(const trajectory::JointVector& q0, const Eigen::Isometry3d& target,
+                        double distance_mm, double speed_scale) const;
+  /// Straight line `distance_mm` up from the current tool pose.
+  Result<Plan> depart(const trajectory::JointVector& q0, double distance_mm,
+                      double speed_scale) const;
+  /// Approach above `target`, straight down to it, close (pick) or open (place) the gripper
+  /// and dwell, straight back up. One trajectory with the gripper event at the bottom.
+  Result<Plan> pick_or_place(const trajectory::JointVector& q0, const Eigen::Isometry3d& target,
+                             double distance_mm, bool close, double speed_scale) const;
+  /// Straight line to `target` with ALTER enabled (the destination follows corrections).
+  Result<Plan> track(const trajectory::JointVector& q0, const Eigen::Isometry3d& target,
+                     bool cumulative, bool world_frame, double speed_scale) const;
+
+  /// The tool pose `distance_mm` "above" `base_T_tool` (see the class comment).
+  Eigen::Isometry3d above(const Eigen::Isometry3d& base_T_tool, double distance_mm) const;
+
+  const kinematics::RobotModel& model() const noexcept { return model_; }
+  const PlannerOptions& options() const noexcept { return options_; }
+
+ private:
+  Status check_pose(const Eigen::Isometry3d& base_T_tool, const char* what) const;
+  Result<trajectory::JointTrajectory> line(const trajectory::JointVector& q0,
+                                           const Eigen::Isometry3d& goal, double speed_scale,
+                                           const char* step) const;
+
+  kinematics::RobotModel model_;
+  PlannerOptions options_;
+  trajectory::JointLimits limits_;
+};
+
+}  // namespace cell::motion

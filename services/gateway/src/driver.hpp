@@ -1,0 +1,91 @@
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <string>
+
+#include "cell/common/result.hpp"
+#include "cell/kinematics/joints.hpp"
+#include "robot.h"
+
+namespace cell::gateway {
+
+using kinematics::JointVector;
+using Clock = std::chrono::steady_clock;
+
+/// Result of one cycle's exchange with the controller.
+enum class CycleStatus : std::uint8_t {
+  kOk,     ///< state/command exchanged
+  kRetry,  ///< transient: line error, missed handshake; the host tolerates a few in a row
+  kFault,  ///< controller error bits or link lost; the host stops and needs a reset
+};
+
+/// What the driver measured this cycle. Units: rad / mm, per second.
+struct JointState {
+  JointVector q;
+  JointVector qd;
+  JointVector effort;                 ///< drive output in controller units (7545: DAC word)
+  cell_robot_GripperState gripper = cell_robot_GRIPPER_UNKNOWN;
+  bool homed = false;
+  bool busy = false;                  ///< a driver-side procedure (homing, gripper dwell) runs
+  std::uint32_t fault_bits = 0;       ///< controller error bits, 0 when none
+};
+
+/// What the host wants this cycle.
+struct JointSetpoint {
+  JointVector q;
+  JointVector qd;
+};
+
+/// Non-cyclic requests, executed on the servo thread between cycles.
+enum class DriverCommand : std::uint8_t {
+  kHome,
+  kGripperOpen,
+  kGripperClose,
+  kLights,     ///< uses halogen_on / fluorescent_on
+  kReset,      ///< clear controller faults
+};
+
+struct CommandArgs {
+  bool halogen_on = false;
+  bool fluorescent_on = false;
+};
+
+/// Name, joint count and cycle of a driver.
+struct DriverInfo {
+  std::string name;
+  int dof = 0;
+  std::chrono::nanoseconds cycle{std::chrono::milliseconds(1)};
+};
+
+/// One controller: the 7545 servo board (DPR), the Excalibur (RS-232 ASCII), a simulator of
+/// either, or the ideal robot. A driver knows its protocol only: no DDS, no policy, no
+/// self-transitions. Lifecycle calls come from the gateway (not real-time), in order
+/// configure -> activate -> (cycles) -> deactivate -> cleanup; read/write come from the
+/// servo thread every cycle and must not allocate or block beyond the cycle.
+class RobotDriver {
+ public:
+  RobotDriver() = default;
+  RobotDriver(const RobotDriver&) = delete;  // one object per physical arm
+  RobotDriver& operator=(const RobotDriver&) = delete;
+  virtual ~RobotDriver() = default;
+
+  virtual Status on_configure() = 0;           ///< open the transport; no power
+  virtual Status on_activate() = 0;            ///< servo on / brakes off
+  virtual void on_deactivate() noexcept = 0;   ///< to rest, power off; safe in any state
+  virtual void on_cleanup() noexcept = 0;      ///< inverse of on_configure
+
+  virtual CycleStatus read(Clock::time_point now, JointState& state) = 0;
+  virtual CycleStatus write(Clock::time_point now, const JointSetpoint& setpoint) = 0;
+
+  /// Starts a non-cyclic command; progress shows in JointState (busy, homed, gripper).
+  /// Errors: kNotReady when the controller cannot take it now (moving, faulted), with why.
+  virtual Status command(DriverCommand command, const CommandArgs& args) = 0;
+
+  /// Meaning of fault bits, e.g. "J1 positive overrun; torques late (0x1000)".
+  virtual std::string describe_faults(std::uint32_t bits) const = 0;
+
+  virtual const DriverInfo& info() const noexcept = 0;
+};
+
+}  // namespace cell::gateway

@@ -1,0 +1,41 @@
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "cell/config/yaml.hpp"
+#include "cell/kinematics/robot_model.hpp"
+#include "cell/service/common_config.hpp"
+
+namespace cell::gateway {
+
+/// config/gateway-<robot>.yaml.
+///
+///   service: {id: gateway.ibm7545}
+///   robot_config: config/robots/ibm7545.yaml   # the robot this gateway drives
+///   cycle_hz: 1000            # servo cycle (the 7545's DPR sample period is 1 ms)
+///   state_rate_hz: 100        # RobotState stream rate, 1..cycle_hz
+///   realtime_priority: 0      # SCHED_FIFO priority of the servo thread; 0: normal scheduling
+///   start_tolerance_deg: 0.5  # a trajectory must start this close to the current setpoint
+///   start_tolerance_mm: 0.5
+///   driver:
+///     kind: ideal             # ideal (more drivers come with the gateway issue)
+///     initial_joints: [0, 0, 0, 0]   # deg for revolute joints, mm for prismatic (ideal)
+///     gripper_time_s: 0.5     # ideal: time to open or close
+struct GatewayConfig {
+  service::CommonConfig common;
+  std::string robot_config;
+  double cycle_hz = 1000.0;
+  double state_rate_hz = 100.0;
+  int realtime_priority = 0;
+  double start_tolerance_rad = 0.5 * 3.141592653589793 / 180.0;
+  double start_tolerance_mm = 0.5;
+  std::string driver_kind = "ideal";
+  std::vector<double> initial_joints_display;  ///< deg / mm as the robot's joints say
+  double gripper_time_s = 0.5;
+};
+
+/// Parses a gateway config (robot_config is resolved against CELL_HOME when relative).
+Result<GatewayConfig> load_config(const config::Document& doc);
+
+}  // namespace cell::gateway

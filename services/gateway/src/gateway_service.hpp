@@ -1,0 +1,72 @@
+#pragma once
+
+#include <atomic>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "cell/bus/reader.hpp"
+#include "cell/bus/topic.hpp"
+#include "cell/bus/writer.hpp"
+#include "cell/kinematics/robot_model.hpp"
+#include "cell/service/runtime.hpp"
+#include "gateway_config.hpp"
+#include "servo.hpp"
+
+namespace cell::gateway {
+
+/// Builds the driver a config names.
+Result<std::unique_ptr<RobotDriver>> make_driver(const GatewayConfig& config,
+                                                 const kinematics::RobotModel& model);
+
+/// One robot's gateway: the servo thread (cycle_hz) runs Servo::cycle and publishes
+/// RobotState every 1/state_rate_hz; the main thread serves the bus: Trajectory and
+/// RobotCommand (answered on cell/robot/command_reply), AlterCorrection, and turns servo
+/// events into CellEvents. Only messages whose robot_id is this gateway's robot are taken
+/// into account.
+///
+/// Topics: in cell/motion/trajectory (command), cell/motion/alter (stream),
+/// cell/robot/command (command); out cell/robot/state (stream), cell/robot/state_latest
+/// (state, 10 Hz), cell/robot/command_reply (recent), cell/health/event.
+class GatewayService {
+ public:
+  /// Throws std::runtime_error when the robot config or the driver cannot be set up.
+  GatewayService(service::Context& ctx, const GatewayConfig& config);
+  ~GatewayService();
+  GatewayService(const GatewayService&) = delete;
+  GatewayService& operator=(const GatewayService&) = delete;
+
+  void run(service::Context& ctx);
+
+ private:
+  void servo_loop();
+  void publish_state(const ServoSnapshot& snapshot, const bus::Writer<cell_robot_RobotState>& w);
+  void handle_trajectory(const cell_motion_Trajectory& message);
+  void handle_command(const cell_robot_RobotCommand& message);
+  void handle_alter(const cell_motion_AlterCorrection& message);
+  void reply(const cell_common_RequestId& id, const Status& status);
+
+  service::Context& ctx_;
+  GatewayConfig config_;
+  kinematics::RobotModel model_;
+  std::unique_ptr<Servo> servo_;
+
+  bus::Topic<cell_motion_Trajectory> trajectory_topic_;
+  bus::Topic<cell_motion_AlterCorrection> alter_topic_;
+  bus::Topic<cell_robot_RobotCommand> command_topic_;
+  bus::Topic<cell_robot_RobotCommandReply> reply_topic_;
+  bus::Topic<cell_robot_RobotState> state_topic_;
+  bus::Topic<cell_robot_RobotState> latest_topic_;
+  bus::Reader<cell_motion_Trajectory> trajectory_reader_;
+  bus::Reader<cell_motion_AlterCorrection> alter_reader_;
+  bus::Reader<cell_robot_RobotCommand> command_reader_;
+  bus::Writer<cell_robot_RobotCommandReply> reply_writer_;
+  bus::Writer<cell_robot_RobotState> state_writer_;
+  bus::Writer<cell_robot_RobotState> latest_writer_;
+
+  std::atomic<bool> stop_servo_{false};
+  std::thread servo_thread_;
+  std::uint64_t state_seq_ = 0;
+};
+
+}  // namespace cell::gateway

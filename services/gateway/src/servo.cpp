@@ -1,0 +1,378 @@
+#include "servo.hpp"
+
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "cell/common/time.hpp"
+#include "cell/motion/robot_adapters.hpp"
+
+namespace cell::gateway {
+namespace {
+
+std::string_view command_name(cell_robot_RobotCommandKind kind) {
+  switch (kind) {
+    case cell_robot_CMD_HOME:
+      return "home";
+    case cell_robot_CMD_GRIPPER_OPEN:
+      return "gripper open";
+    case cell_robot_CMD_GRIPPER_CLOSE:
+      return "gripper close";
+    case cell_robot_CMD_LIGHTS:
+      return "lights";
+    case cell_robot_CMD_STOP:
+      return "stop";
+    case cell_robot_CMD_RESET:
+      return "reset";
+    case cell_robot_CMD_SET_MODE:
+      return "set mode";
+    case cell_robot_CMD_SET_GAINS:
+      return "set gains";
+    case cell_robot_CMD_SET_TOLERANCE:
+      return "set tolerance";
+    case cell_robot_CMD_ALTER_OFF:
+      return "alter off";
+  }
+  return "unknown";
+}
+
+}  // namespace
+
+Servo::Servo(const kinematics::RobotModel& model, std::unique_ptr<RobotDriver> driver,
+             double start_tolerance_rad, double start_tolerance_mm)
+    : model_(model),
+      driver_(std::move(driver)),
+      start_tolerance_rad_(start_tolerance_rad),
+      start_tolerance_mm_(start_tolerance_mm),
+      limits_(motion::joint_limits(model)),
+      executor_(motion::forward_fn(model), motion::inverse_fn(model)) {}
+
+double Servo::seconds(Clock::time_point t) const {
+  return std::chrono::duration<double>(t - epoch_).count();
+}
+
+Status Servo::start(Clock::time_point now) {
+  epoch_ = now;
+  CELL_TRY(driver_->on_configure());
+  if (auto s = driver_->on_activate(); !s) {
+    driver_->on_cleanup();
+    return s;
+  }
+  if (driver_->read(now, measured_) == CycleStatus::kFault) {
+    const std::string why = driver_->describe_faults(measured_.fault_bits);
+    driver_->on_deactivate();
+    driver_->on_cleanup();
+    return Error{Errc::kProtocol, "the controller reports a fault at start: " + why};
+  }
+  setpoint_.q = measured_.q;
+  setpoint_.qd = JointVector::Zero(measured_.q.size());
+  cycle(now);
+  return ok_status();
+}
+
+void Servo::shutdown() noexcept {
+  driver_->on_deactivate();
+  driver_->on_cleanup();
+}
+
+Status Servo::check_start(const trajectory::JointTrajectory& trajectory,
+                          const JointVector& setpoint) const {
+  const JointVector& start = trajectory.start();
+  for (Eigen::Index j = 0; j < start.size(); ++j) {
+    const bool prismatic = limits_.prismatic[static_cast<std::size_t>(j)];
+    const double tolerance = prismatic ? start_tolerance_mm_ : start_tolerance_rad_;
+    if (std::abs(start[j] - setpoint[j]) > tolerance) {
+      return Error{Errc::kInvalidArgument,
+                   fmt::format("trajectory starts with joint {} at {} but the robot is at {} "
+                               "(tolerance {})",
+                               limits_.names[static_cast<std::size_t>(j)],
+                               trajectory::format_joint(start[j], prismatic),
+                               trajectory::format_joint(setpoint[j], prismatic),
+                               trajectory::format_joint(tolerance, prismatic))};
+    }
+  }
+  return ok_status();
+}
+
+Status Servo::post_trajectory(motion::Plan plan, std::string trajectory_id) {
+  if (plan.trajectory.dof() != model_.dof()) {
+    return Error{Errc::kInvalidArgument,
+                 fmt::format("trajectory has {} joints, robot '{}' has {}", plan.trajectory.dof(),
+                             model_.id(), model_.dof())};
+  }
+  CELL_TRY(trajectory::check_limits(plan.trajectory, limits_, 0.02));
+  std::lock_guard lock(mutex_);
+  switch (snapshot_.mode) {
+    case cell_robot_MODE_FAULT:
+      return Error{Errc::kNotReady, "robot is in fault (" + snapshot_.fault_text +
+                                        "): send reset first"};
+    case cell_robot_MODE_STOPPED:
+      return Error{Errc::kNotReady, "robot was stopped: send reset first"};
+    case cell_robot_MODE_HOMING:
+      return Error{Errc::kNotReady, "robot is homing"};
+    default:
+      break;
+  }
+  if (!snapshot_.measured.homed) {
+    return Error{Errc::kNotReady, "robot is not homed: send home first"};
+  }
+  if (snapshot_.moving || pending_.plan) {
+    return Error{Errc::kNotReady, "robot is busy with trajectory '" +
+                                      (pending_.plan ? pending_.plan_id : snapshot_.trajectory_id) +
+                                      "'"};
+  }
+  if (snapshot_.measured.busy) {
+    return Error{Errc::kNotReady, "robot is busy (gripper or homing in progress)"};
+  }
+  CELL_TRY(check_start(plan.trajectory, snapshot_.setpoint.q));
+  pending_.plan = std::move(plan);
+  pending_.plan_id = std::move(trajectory_id);
+  return ok_status();
+}
+
+void Servo::post_alter(trajectory::AlterCorrection correction, Clock::time_point stamp,
+                       const std::string& trajectory_id) {
+  correction.stamp_s = seconds(stamp);
+  std::lock_guard lock(mutex_);
+  const bool ours = pending_.plan ? trajectory_id == pending_.plan_id
+                                  : trajectory_id == snapshot_.trajectory_id;
+  if (!ours) {
+    return;  // a late correction for an earlier trajectory, or for another robot's
+  }
+  pending_.alter = correction;  // last one wins
+  pending_.alter_id = trajectory_id;
+}
+
+Status Servo::post_command(cell_robot_RobotCommandKind kind, const CommandArgs& args) {
+  std::lock_guard lock(mutex_);
+  const bool moving = snapshot_.moving || pending_.plan.has_value();
+  switch (kind) {
+    case cell_robot_CMD_STOP:
+    case cell_robot_CMD_LIGHTS:
+    case cell_robot_CMD_ALTER_OFF:
+      break;
+    case cell_robot_CMD_RESET:
+      if (snapshot_.mode != cell_robot_MODE_FAULT && snapshot_.mode != cell_robot_MODE_STOPPED) {
+        return ok_status();  // nothing to reset: harmless
+      }
+      break;
+    case cell_robot_CMD_HOME:
+    case cell_robot_CMD_GRIPPER_OPEN:
+    case cell_robot_CMD_GRIPPER_CLOSE:
+      if (moving) {
+        return Error{Errc::kNotReady,
+                     fmt::format("cannot {} while the robot moves", command_name(kind))};
+      }
+      if (snapshot_.mode == cell_robot_MODE_FAULT) {
+        return Error{Errc::kNotReady, fmt::format("cannot {}: robot is in fault ({})",
+                                                  command_name(kind), snapshot_.fault_text)};
+      }
+      break;
+    case cell_robot_CMD_SET_MODE:
+    case cell_robot_CMD_SET_GAINS:
+    case cell_robot_CMD_SET_TOLERANCE:
+      return Error{Errc::kInvalidArgument,
+                   fmt::format("'{}' is not supported by the {} driver", command_name(kind),
+                               driver_->info().name)};
+    default:
+      return Error{Errc::kInvalidArgument,
+                   fmt::format("unknown command kind {}", static_cast<int>(kind))};
+  }
+  pending_.commands.emplace_back(kind, args);
+  return ok_status();
+}
+
+void Servo::event(cell_health_Severity severity, std::string code, std::string text) {
+  std::lock_guard lock(mutex_);
+  if (events_out_.size() < 256) {
+    events_out_.push_back(ServoEvent{severity, std::move(code), std::move(text)});
+  }
+}
+
+std::vector<ServoEvent> Servo::take_events() {
+  std::lock_guard lock(mutex_);
+  return std::exchange(events_out_, {});
+}
+
+void Servo::fault(std::uint32_t bits, const std::string& text) {
+  executor_.stop();
+  mode_ = cell_robot_MODE_FAULT;
+  event(cell_health_SEVERITY_ERROR, "robot.fault",
+        fmt::format("robot '{}' faulted (bits 0x{:04x}): {}", model_.id(), bits, text));
+}
+
+void Servo::apply_commands(
+    std::vector<std::pair<cell_robot_RobotCommandKind, CommandArgs>>& commands) {
+  for (auto& [kind, args] : commands) {
+    Status status = ok_status();
+    switch (kind) {
+      case cell_robot_CMD_STOP:
+        executor_.stop();
+        events_.clear();
+        if (mode_ != cell_robot_MODE_FAULT) {
+          mode_ = cell_robot_MODE_STOPPED;
+        }
+        event(cell_health_SEVERITY_WARNING, "robot.stopped",
+              fmt::format("robot '{}' stopped on command", model_.id()));
+        break;
+      case cell_robot_CMD_RESET:
+        status = driver_->command(DriverCommand::kReset, args);
+        if (status) {
+          mode_ = cell_robot_MODE_IDLE;
+          event(cell_health_SEVERITY_INFO, "robot.reset",
+                fmt::format("robot '{}' reset", model_.id()));
+        }
+        break;
+      case cell_robot_CMD_HOME:
+        status = driver_->command(DriverCommand::kHome, args);
+        break;
+      case cell_robot_CMD_GRIPPER_OPEN:
+        status = driver_->command(DriverCommand::kGripperOpen, args);
+        break;
+      case cell_robot_CMD_GRIPPER_CLOSE:
+        status = driver_->command(DriverCommand::kGripperClose, args);
+        break;
+      case cell_robot_CMD_LIGHTS:
+        status = driver_->command(DriverCommand::kLights, args);
+        if (status) {
+          std::lock_guard lock(mutex_);
+          snapshot_.halogen_on = args.halogen_on;
+          snapshot_.fluorescent_on = args.fluorescent_on;
+        }
+        break;
+      case cell_robot_CMD_ALTER_OFF:
+        executor_.alter_off();
+        break;
+      default:
+        break;
+    }
+    if (!status) {
+      event(cell_health_SEVERITY_WARNING, "robot.command_failed",
+            fmt::format("robot '{}': {} failed: {}", model_.id(), command_name(kind),
+                        status.error().message));
+    }
+  }
+  commands.clear();
+}
+
+void Servo::cycle(Clock::time_point now) {
+  const double t = seconds(now);
+  Pending pending;
+  {
+    std::lock_guard lock(mutex_);
+    std::swap(pending, pending_);
+  }
+  apply_commands(pending.commands);
+  if (pending.plan && mode_ != cell_robot_MODE_FAULT && mode_ != cell_robot_MODE_STOPPED) {
+    motion::Plan& plan = *pending.plan;
+    events_ = std::move(plan.events);
+    next_event_ = 0;
+    hold_until_s_ = -1;
+    trajectory_id_ = pending.plan_id;
+    executor_.load(std::move(plan.trajectory), t, plan.alter_enabled,
+                   {.cumulative = plan.alter_cumulative, .world_frame = plan.alter_world_frame});
+    mode_ = cell_robot_MODE_MOVING;
+  }
+  if (pending.alter && pending.alter_id == trajectory_id_) {
+    trajectory::AlterCorrection c = *pending.alter;
+    executor_.submit_alter(c);
+  }
+
+  // Read the controller.
+  const CycleStatus read_status = driver_->read(now, measured_);
+  if (read_status == CycleStatus::kFault && mode_ != cell_robot_MODE_FAULT) {
+    fault(measured_.fault_bits, driver_->describe_faults(measured_.fault_bits));
+  } else if (read_status == CycleStatus::kRetry && ++retries_in_a_row_ > 3) {
+    fault(0, "link to the controller failed 4 cycles in a row");
+  } else if (read_status == CycleStatus::kOk) {
+    retries_in_a_row_ = 0;
+  }
+
+  // Next setpoint.
+  const trajectory::ExecState state = executor_.step(t, sample_);
+  if (state != trajectory::ExecState::kIdle) {
+    setpoint_.q = sample_.q;
+    setpoint_.qd = sample_.qd;
+  } else {
+    setpoint_.qd.setZero();
+  }
+  if (state == trajectory::ExecState::kFailed && mode_ == cell_robot_MODE_MOVING) {
+    mode_ = cell_robot_MODE_FAULT;
+    event(cell_health_SEVERITY_ERROR, "robot.alter_failed",
+          fmt::format("robot '{}': tracking left the workspace: {}", model_.id(),
+                      executor_.failure().message));
+  }
+  // Gripper events fire at their time along the trajectory.
+  while (mode_ == cell_robot_MODE_MOVING && next_event_ < events_.size() &&
+         executor_.progress() * executor_.trajectory().duration_s() + 1e-9 >=
+             events_[next_event_].t_s) {
+    const auto& e = events_[next_event_++];
+    auto status = driver_->command(e.close ? DriverCommand::kGripperClose
+                                           : DriverCommand::kGripperOpen,
+                                   CommandArgs{});
+    if (!status) {
+      event(cell_health_SEVERITY_WARNING, "robot.command_failed", status.error().message);
+    }
+  }
+  const bool arrived = state == trajectory::ExecState::kArrived;
+  const bool tracking = arrived && executor_.alter_active();
+  if (mode_ == cell_robot_MODE_MOVING && arrived && !tracking && !measured_.busy) {
+    mode_ = cell_robot_MODE_IDLE;
+  }
+  if (mode_ == cell_robot_MODE_IDLE && measured_.busy && !measured_.homed) {
+    mode_ = cell_robot_MODE_HOMING;
+  } else if (mode_ == cell_robot_MODE_HOMING && !measured_.busy) {
+    mode_ = cell_robot_MODE_IDLE;
+  }
+
+  // Write the controller.
+  if (mode_ != cell_robot_MODE_FAULT) {
+    const CycleStatus write_status = driver_->write(now, setpoint_);
+    if (write_status == CycleStatus::kFault) {
+      fault(measured_.fault_bits, driver_->describe_faults(measured_.fault_bits));
+    }
+  }
+
+  ++cycle_;
+  std::lock_guard lock(mutex_);
+  snapshot_.measured = measured_;
+  snapshot_.setpoint = setpoint_;
+  auto pose = model_.forward(measured_.q);
+  snapshot_.base_T_tool = pose ? *pose : Eigen::Isometry3d::Identity();
+  snapshot_.mode = mode_;
+  snapshot_.moving = mode_ == cell_robot_MODE_MOVING;
+  snapshot_.fault_bits = measured_.fault_bits;
+  if (mode_ == cell_robot_MODE_FAULT && snapshot_.fault_text.empty()) {
+    snapshot_.fault_text = measured_.fault_bits != 0 ? driver_->describe_faults(measured_.fault_bits)
+                                                     : executor_.failure().message;
+  } else if (mode_ != cell_robot_MODE_FAULT) {
+    snapshot_.fault_text.clear();
+  }
+  snapshot_.trajectory_id = trajectory_id_;
+  snapshot_.progress = executor_.progress();
+  snapshot_.tracking = tracking;
+  snapshot_.cycle = cycle_;
+  snapshot_.stamp_ns = wall_time_ns();
+  snapshot_.jitter_max_us = jitter_max_us_;
+  snapshot_.overruns = overruns_;
+}
+
+void Servo::reset_jitter() noexcept {
+  std::lock_guard lock(mutex_);
+  jitter_max_us_ = 0;
+}
+
+void Servo::record_timing(double wake_error_us, bool overrun) noexcept {
+  std::lock_guard lock(mutex_);
+  jitter_max_us_ = std::max(jitter_max_us_, std::abs(wake_error_us));
+  if (overrun) {
+    ++overruns_;
+  }
+}
+
+ServoSnapshot Servo::snapshot() const {
+  std::lock_guard lock(mutex_);
+  return snapshot_;
+}
+
+}  // namespace cell::gateway

@@ -1,0 +1,151 @@
+#include "gateway_service.hpp"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "cell/bus/request_reply.hpp"
+#include "cell/bus/view.hpp"
+#include "cell/kinematics/robot_config.hpp"
+#include "cell/motion/planner.hpp"
+#include "cell/testing/env.hpp"
+#include "cell/testing/matchers.hpp"
+#include "cell/testing/service_harness.hpp"
+
+namespace cell::gateway {
+namespace {
+
+using namespace std::chrono_literals;
+using Harness = cell::testing::ServiceHarness<GatewayConfig, GatewayService>;
+
+GatewayConfig ideal_config() {
+  GatewayConfig c;
+  c.common.service_id = "gateway.ibm7545";
+  c.robot_config = cell::testing::source_dir() + "/config/robots/ibm7545.yaml";
+  c.cycle_hz = 1000;
+  c.state_rate_hz = 100;
+  c.initial_joints_display = {45, 105, 0, 0};
+  c.gripper_time_s = 0.05;
+  return c;
+}
+
+class GatewayTest : public ::testing::Test {
+ protected:
+  GatewayTest()
+      : domain_(cell::testing::test_domain_id()),
+        partition_(cell::testing::unique_partition()),
+        gateway_(domain_, partition_, ideal_config(), "gateway"),
+        client_(domain_, partition_),
+        commands_(client_, bus::topics::kRobotCommand, bus::topics::kRobotCommandReply, "test"),
+        trajectories_(client_, bus::topics::kTrajectory, bus::topics::kRobotCommandReply, "test-t"),
+        state_topic_(client_, bus::topics::kRobotState),
+        states_(client_, state_topic_, bus::topics::kRobotState),
+        model_(*kinematics::load_robot(ideal_config().robot_config)) {}
+
+  Result<bus::Owned<cell_robot_RobotCommandReply>> command(cell_robot_RobotCommandKind kind,
+                                                           const std::string& robot = "ibm7545") {
+    cell_robot_RobotCommand c{};
+    c.robot_id = bus::borrow(robot);
+    c.kind = kind;
+    return commands_.call(c, 5s);
+  }
+
+  /// The latest RobotState (waits up to 2 s for one).
+  std::optional<bus::Owned<cell_robot_RobotState>> latest() {
+    std::optional<bus::Owned<cell_robot_RobotState>> last;
+    const auto deadline = std::chrono::steady_clock::now() + 2s;
+    while (!last && std::chrono::steady_clock::now() < deadline) {
+      states_.wait_for_data(100ms);
+      auto batch = states_.take_copies(64);
+      for (auto& s : *batch) {
+        last = std::move(s);
+      }
+    }
+    return last;
+  }
+
+  std::uint32_t domain_;
+  std::string partition_;
+  Harness gateway_;
+  bus::Participant client_;
+  bus::Requester<cell_robot_RobotCommand, cell_robot_RobotCommandReply> commands_;
+  bus::Requester<cell_motion_Trajectory, cell_robot_RobotCommandReply> trajectories_;
+  bus::Topic<cell_robot_RobotState> state_topic_;
+  bus::Reader<cell_robot_RobotState> states_;
+  kinematics::RobotModel model_;
+};
+
+TEST_F(GatewayTest, PublishesStateAtTheConfiguredRate) {
+  ASSERT_TRUE(latest().has_value());
+  std::size_t n = 0;
+  const auto start = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - start < 1s) {
+    states_.wait_for_data(50ms);
+    n += states_.take_copies(64)->size();
+  }
+  EXPECT_GT(n, 70U);   // 100 Hz nominal; generous for a loaded 2-core machine
+  EXPECT_LT(n, 130U);
+  auto s = latest();
+  EXPECT_EQ(bus::str((*s)->robot_id), "ibm7545");
+  EXPECT_EQ(bus::span((*s)->position_rad_or_mm).size(), 4U);
+  EXPECT_DOUBLE_EQ((*s)->cycle_period_s, 0.001);
+}
+
+TEST_F(GatewayTest, RefusesMalformedTrajectoriesAndKeepsServing) {
+  ASSERT_TRUE(command(cell_robot_CMD_HOME).has_value());
+  // Wrong number of joints.
+  motion::Plan bad;
+  bad.trajectory = *trajectory::JointTrajectory::from_knots(
+      {{0.0, trajectory::JointVector::Zero(6), trajectory::JointVector::Zero(6)}});
+  motion::TrajectoryWire wire;
+  motion::to_idl(bad, "ibm7545", "bad", "m", wire);
+  auto reply = trajectories_.call(wire.message, 5s);
+  ASSERT_THAT(reply, ::cell::testing::IsOk());
+  EXPECT_FALSE((*reply)->status.accepted);
+  EXPECT_THAT(bus::str((*reply)->status.reason), ::testing::HasSubstr("has 4 joints"));
+  // A good one is accepted and executed.
+  auto state = latest();
+  ASSERT_TRUE(state.has_value());
+  trajectory::JointVector q0(4);
+  for (int j = 0; j < 4; ++j) {
+    q0[j] = bus::span((*state)->position_rad_or_mm)[static_cast<std::size_t>(j)];
+  }
+  trajectory::JointVector q1 = q0;
+  q1[2] = 50;  // Z down 50 mm
+  motion::Planner planner(model_, {});
+  auto plan = planner.move_joints(q0, q1, 1.0);
+  ASSERT_THAT(plan, ::cell::testing::IsOk());
+  motion::to_idl(*plan, "ibm7545", "good", "m", wire);
+  reply = trajectories_.call(wire.message, 5s);
+  ASSERT_THAT(reply, ::cell::testing::IsOk());
+  EXPECT_TRUE((*reply)->status.accepted) << bus::str((*reply)->status.reason);
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        auto s = latest();
+        return s && bus::str((*s)->trajectory_id) == "good" && !(*s)->moving &&
+               std::abs(bus::span((*s)->position_rad_or_mm)[2] - 50.0) < 1e-9;
+      },
+      10s));
+}
+
+TEST_F(GatewayTest, AnswersEveryCommandAndIgnoresOtherRobots) {
+  auto home = command(cell_robot_CMD_HOME);
+  ASSERT_THAT(home, ::cell::testing::IsOk());
+  EXPECT_TRUE((*home)->status.accepted);
+  auto close = command(cell_robot_CMD_GRIPPER_CLOSE);
+  ASSERT_THAT(close, ::cell::testing::IsOk());
+  EXPECT_TRUE((*close)->status.accepted);
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        auto s = latest();
+        return s && (*s)->gripper == cell_robot_GRIPPER_CLOSED && (*s)->homed;
+      },
+      5s));
+  auto gains = command(cell_robot_CMD_SET_GAINS);
+  ASSERT_THAT(gains, ::cell::testing::IsOk());
+  EXPECT_FALSE((*gains)->status.accepted);
+  EXPECT_THAT(bus::str((*gains)->status.reason), ::testing::HasSubstr("not supported"));
+  EXPECT_THAT(command(cell_robot_CMD_HOME, "excalibur"), ::cell::testing::IsErr(Errc::kTimeout));
+}
+
+}  // namespace
+}  // namespace cell::gateway

@@ -1,0 +1,261 @@
+#include "servo.hpp"
+
+#include <numbers>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "cell/kinematics/robot_config.hpp"
+#include "cell/motion/planner.hpp"
+#include "cell/testing/env.hpp"
+#include "cell/testing/matchers.hpp"
+#include "ideal_driver.hpp"
+
+namespace cell::gateway {
+namespace {
+
+using ::cell::testing::IsErrWith;
+using ::cell::testing::IsOk;
+using namespace std::chrono_literals;
+
+double deg(double d) { return d * std::numbers::pi / 180; }
+
+JointVector jv(std::initializer_list<double> v) {
+  JointVector out(static_cast<Eigen::Index>(v.size()));
+  Eigen::Index i = 0;
+  for (double x : v) {
+    out[i++] = x;
+  }
+  return out;
+}
+
+/// A scripted controller: follows setpoints like the ideal robot, but a test can raise fault
+/// bits or make the link fail, and it records the commands it received.
+class FakeDriver final : public RobotDriver {
+ public:
+  explicit FakeDriver(JointVector q0) : q_(std::move(q0)) {
+    info_.name = "fake";
+    info_.dof = static_cast<int>(q_.size());
+  }
+  Status on_configure() override { return ok_status(); }
+  Status on_activate() override { return ok_status(); }
+  void on_deactivate() noexcept override {}
+  void on_cleanup() noexcept override {}
+  CycleStatus read(Clock::time_point, JointState& s) override {
+    s.q = q_;
+    s.qd = JointVector::Zero(q_.size());
+    s.effort = JointVector::Zero(q_.size());
+    s.homed = true;
+    s.gripper = gripper;
+    s.fault_bits = fault_bits;
+    if (link_down) {
+      return CycleStatus::kRetry;
+    }
+    return fault_bits != 0 ? CycleStatus::kFault : CycleStatus::kOk;
+  }
+  CycleStatus write(Clock::time_point, const JointSetpoint& sp) override {
+    q_ = sp.q;
+    ++writes;
+    return CycleStatus::kOk;
+  }
+  Status command(DriverCommand c, const CommandArgs&) override {
+    commands.push_back(c);
+    if (c == DriverCommand::kReset) {
+      fault_bits = 0;
+    }
+    if (c == DriverCommand::kGripperClose) {
+      gripper = cell_robot_GRIPPER_CLOSED;
+    }
+    if (c == DriverCommand::kGripperOpen) {
+      gripper = cell_robot_GRIPPER_OPEN;
+    }
+    return ok_status();
+  }
+  std::string describe_faults(std::uint32_t bits) const override {
+    return bits & 0x1000 ? "PS/2 did not provide torques in time (0x1000)" : "other";
+  }
+  const DriverInfo& info() const noexcept override { return info_; }
+
+  std::uint32_t fault_bits = 0;
+  bool link_down = false;
+  cell_robot_GripperState gripper = cell_robot_GRIPPER_OPEN;
+  std::vector<DriverCommand> commands;
+  int writes = 0;
+
+ private:
+  DriverInfo info_;
+  JointVector q_;
+};
+
+class ServoTest : public ::testing::Test {
+ protected:
+  ServoTest()
+      : model_(*kinematics::load_robot(cell::testing::source_dir() + "/config/robots/ibm7545.yaml")),
+        planner_(model_, motion::PlannerOptions{}) {}
+
+  /// Runs cycles of 1 ms from now_ until `done` holds or `max_s` passes.
+  template <typename Fn>
+  bool run_until(Servo& servo, Fn&& done, double max_s) {
+    for (double t = 0; t < max_s; t += 0.001) {
+      now_ += 1ms;
+      servo.cycle(now_);
+      if (done(servo.snapshot())) {
+        return true;
+      }
+    }
+    return false;
+  }
+
+  kinematics::RobotModel model_;
+  motion::Planner planner_;
+  Clock::time_point now_ = Clock::now();
+};
+
+TEST_F(ServoTest, IdealRobotRefusesUntilHomedThenFollowsExactly) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  Servo servo(model_, std::make_unique<IdealDriver>(4, q0, 0.5, 1ms), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  auto plan = planner_.move_joints(q0, jv({deg(60), deg(90), 100, deg(30)}), 1.0);
+  ASSERT_THAT(plan, IsOk());
+  EXPECT_THAT(servo.post_trajectory(*plan, "t1"), IsErrWith(Errc::kNotReady, "not homed"));
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_HOME, {}), IsOk());
+  servo.cycle(now_ += 1ms);
+  ASSERT_THAT(servo.post_trajectory(*plan, "t1"), IsOk());
+  EXPECT_THAT(servo.post_trajectory(*plan, "t2"), IsErrWith(Errc::kNotReady, "busy"));
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.moving; }, 0.01));
+  // Halfway it is where the trajectory says.
+  const double half = plan->trajectory.duration_s() / 2;
+  ASSERT_TRUE(run_until(servo, [&](const ServoSnapshot& s) { return s.progress >= 0.5; }, 10));
+  EXPECT_TRUE(servo.snapshot().measured.q.isApprox(plan->trajectory.sample(half).q, 1e-2));
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return !s.moving; }, 10));
+  servo.cycle(now_ += 1ms);  // a cycle reads before it writes: measured lags one cycle
+  const ServoSnapshot s = servo.snapshot();
+  EXPECT_EQ(s.mode, cell_robot_MODE_IDLE);
+  EXPECT_EQ(s.trajectory_id, "t1");
+  EXPECT_DOUBLE_EQ(s.progress, 1.0);
+  EXPECT_TRUE(s.measured.q.isApprox(plan->trajectory.end(), 1e-12));
+  EXPECT_THAT(s.base_T_tool, ::cell::testing::IsNearPose(*model_.forward(plan->trajectory.end()), 1e-9));
+}
+
+TEST_F(ServoTest, RefusesATrajectoryThatDoesNotStartHere) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  Servo servo(model_, std::make_unique<FakeDriver>(q0), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  auto plan = planner_.move_joints(jv({deg(50), deg(105), 0, 0}), q0, 1.0);
+  ASSERT_THAT(plan, IsOk());
+  EXPECT_THAT(servo.post_trajectory(*plan, "t"),
+              IsErrWith(Errc::kInvalidArgument,
+                        "trajectory starts with joint j1 at 50.00 deg but the robot is at 45.00 deg"));
+}
+
+TEST_F(ServoTest, StopHaltsWithinOneCycleAndNeedsAReset) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  auto driver = std::make_unique<FakeDriver>(q0);
+  FakeDriver* fake = driver.get();
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  auto plan = planner_.move_joints(q0, jv({deg(90), deg(45), 200, deg(90)}), 1.0);
+  ASSERT_THAT(servo.post_trajectory(*plan, "t"), IsOk());
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.progress > 0.3; }, 10));
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_STOP, {}), IsOk());
+  servo.cycle(now_ += 1ms);  // the stop takes effect in this cycle
+  const JointVector held = servo.snapshot().setpoint.q;
+  EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_STOPPED);
+  ASSERT_FALSE(run_until(servo, [&](const ServoSnapshot& s) { return s.setpoint.q != held; }, 0.5));
+  EXPECT_THAT(servo.post_trajectory(*planner_.move_joints(held, q0, 1.0), "u"),
+              IsErrWith(Errc::kNotReady, "stopped"));
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_RESET, {}), IsOk());
+  servo.cycle(now_ += 1ms);
+  EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_IDLE);
+  EXPECT_THAT(servo.post_trajectory(*planner_.move_joints(held, q0, 1.0), "u"), IsOk());
+  EXPECT_GT(fake->writes, 0);
+}
+
+TEST_F(ServoTest, ControllerFaultStopsMotionIsReportedAndCleared) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  auto driver = std::make_unique<FakeDriver>(q0);
+  FakeDriver* fake = driver.get();
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  ASSERT_THAT(servo.post_trajectory(*planner_.move_joints(q0, jv({deg(90), deg(45), 200, 0}), 1.0),
+                                    "t"),
+              IsOk());
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.progress > 0.2; }, 10));
+  fake->fault_bits = 0x1000;
+  servo.cycle(now_ += 1ms);
+  const ServoSnapshot s = servo.snapshot();
+  EXPECT_EQ(s.mode, cell_robot_MODE_FAULT);
+  EXPECT_FALSE(s.moving);
+  EXPECT_THAT(s.fault_text, ::testing::HasSubstr("torques in time"));
+  const auto events = servo.take_events();
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events[0].code, "robot.fault");
+  EXPECT_THAT(events[0].text, ::testing::HasSubstr("0x1000"));
+  EXPECT_THAT(servo.post_trajectory(*planner_.move_joints(s.setpoint.q, q0, 1.0), "u"),
+              IsErrWith(Errc::kNotReady, "fault"));
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_RESET, {}), IsOk());
+  servo.cycle(now_ += 1ms);
+  EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_IDLE);
+}
+
+TEST_F(ServoTest, LinkFailingFourCyclesInARowIsAFault) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  auto driver = std::make_unique<FakeDriver>(q0);
+  FakeDriver* fake = driver.get();
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  fake->link_down = true;
+  for (int i = 0; i < 3; ++i) {
+    servo.cycle(now_ += 1ms);
+    EXPECT_NE(servo.snapshot().mode, cell_robot_MODE_FAULT) << "retry " << i;
+  }
+  servo.cycle(now_ += 1ms);
+  EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_FAULT);
+}
+
+TEST_F(ServoTest, PickClosesTheGripperAtTheBottom) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  auto driver = std::make_unique<FakeDriver>(q0);
+  FakeDriver* fake = driver.get();
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  Eigen::Isometry3d grasp = Eigen::Isometry3d::Identity();
+  grasp.translation() = Eigen::Vector3d(134.39, 501.25, -227.7);
+  auto plan = planner_.pick_or_place(q0, grasp, 27.7, true, 1.0);
+  ASSERT_THAT(plan, IsOk());
+  const double t_close = plan->events[0].t_s;
+  ASSERT_THAT(servo.post_trajectory(*plan, "pick"), IsOk());
+  servo.cycle(now_ += 1ms);
+  ASSERT_TRUE(run_until(servo, [&](const ServoSnapshot&) { return !fake->commands.empty(); }, 20));
+  EXPECT_EQ(fake->commands[0], DriverCommand::kGripperClose);
+  const ServoSnapshot at_close = servo.snapshot();
+  EXPECT_NEAR(at_close.progress * plan->trajectory.duration_s(), t_close, 0.002);
+  EXPECT_THAT(at_close.base_T_tool, ::cell::testing::IsNearPose(grasp, 0.01));
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return !s.moving; }, 20));
+}
+
+TEST_F(ServoTest, AlterMovesTheDestinationByTheTotalCorrection) {
+  const JointVector q0 = jv({deg(45), deg(105), 100, 0});
+  Servo servo(model_, std::make_unique<FakeDriver>(q0), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  Eigen::Isometry3d goal = *model_.forward(q0);
+  goal.translation() += Eigen::Vector3d(40, 30, 0);
+  auto plan = planner_.track(q0, goal, false, true, 1.0);
+  ASSERT_THAT(plan, IsOk());
+  ASSERT_THAT(servo.post_trajectory(*plan, "track"), IsOk());
+  trajectory::AlterCorrection c;
+  c.translation_mm = Eigen::Vector3d(0, -12, 0);
+  servo.post_alter(c, now_, "track");
+  trajectory::AlterCorrection stale;
+  stale.translation_mm = Eigen::Vector3d(100, 0, 0);
+  servo.post_alter(stale, now_, "earlier");  // another trajectory's correction: ignored
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.tracking; }, 10));
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_ALTER_OFF, {}), IsOk());
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return !s.moving; }, 1));
+  Eigen::Isometry3d expected = goal;
+  expected.translation().y() -= 12;
+  EXPECT_THAT(servo.snapshot().base_T_tool, ::cell::testing::IsNearPose(expected, 1e-6));
+}
+
+}  // namespace
+}  // namespace cell::gateway

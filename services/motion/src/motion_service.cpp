@@ -1,0 +1,484 @@
+#include "motion_service.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+#include "cell/bus/request_reply.hpp"
+#include "cell/bus/view.hpp"
+#include "cell/common/log.hpp"
+#include "cell/common/time.hpp"
+#include "cell/kinematics/robot_config.hpp"
+#include "cell/motion/wire.hpp"
+
+namespace cell::motion_service {
+namespace {
+
+constexpr dds_attach_t kStop = 1;
+constexpr dds_attach_t kRequest = 2;
+constexpr dds_attach_t kState = 3;
+constexpr dds_attach_t kReply = 4;
+
+using std::chrono::steady_clock;
+
+double seconds_since(steady_clock::time_point t) {
+  return std::chrono::duration<double>(steady_clock::now() - t).count();
+}
+
+/// Samples base_T_tool along a plan for previews: every 20 ms, at most 500 poses.
+std::vector<Eigen::Isometry3d> sample_path(const motion::Plan& plan,
+                                           const kinematics::RobotModel& model) {
+  std::vector<Eigen::Isometry3d> path;
+  const double d = plan.trajectory.duration_s();
+  const int n = std::clamp(static_cast<int>(std::ceil(d / 0.02)), 1, 499);
+  for (int i = 0; i <= n; ++i) {
+    auto pose = model.forward(plan.trajectory.sample(d * i / n).q);
+    if (pose) {
+      path.push_back(*pose);
+    }
+  }
+  return path;
+}
+
+Status finite_joints(std::span<const double> values, int dof, const char* what) {
+  if (static_cast<int>(values.size()) != dof) {
+    return Error{Errc::kInvalidArgument,
+                 fmt::format("{}: {} values given, the robot has {} joints", what, values.size(),
+                             dof)};
+  }
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    if (!std::isfinite(values[i])) {
+      return Error{Errc::kInvalidArgument, fmt::format("{}: value {} is not finite", what, i)};
+    }
+  }
+  return ok_status();
+}
+
+}  // namespace
+
+std::string_view to_string(cell_motion_MotionKind kind) noexcept {
+  switch (kind) {
+    case cell_motion_MOTION_MOVE_JOINTS:
+      return "move_joints";
+    case cell_motion_MOTION_MOVE_POSE:
+      return "move_pose";
+    case cell_motion_MOTION_MOVE_LINEAR:
+      return "move_linear";
+    case cell_motion_MOTION_VIA_PATH:
+      return "via_path";
+    case cell_motion_MOTION_APPROACH:
+      return "approach";
+    case cell_motion_MOTION_DEPART:
+      return "depart";
+    case cell_motion_MOTION_PICK:
+      return "pick";
+    case cell_motion_MOTION_PLACE:
+      return "place";
+    case cell_motion_MOTION_TRACK:
+      return "track";
+    case cell_motion_MOTION_STOP:
+      return "stop";
+    case cell_motion_MOTION_ALTER_OFF:
+      return "alter_off";
+  }
+  return "unknown";
+}
+
+MotionService::MotionService(service::Context& ctx, const MotionConfig& config)
+    : ctx_(ctx),
+      config_(config),
+      client_id_(bus::make_client_id(config.common.service_id)),
+      request_topic_(ctx.participant(), bus::topics::kMotionRequest),
+      status_topic_(ctx.participant(), bus::topics::kMotionStatus),
+      trajectory_topic_(ctx.participant(), bus::topics::kTrajectory),
+      state_topic_(ctx.participant(), bus::topics::kRobotState),
+      command_topic_(ctx.participant(), bus::topics::kRobotCommand),
+      reply_topic_(ctx.participant(), bus::topics::kRobotCommandReply),
+      request_reader_(ctx.participant(), request_topic_, bus::topics::kMotionRequest),
+      status_writer_(ctx.participant(), status_topic_, bus::topics::kMotionStatus),
+      trajectory_writer_(ctx.participant(), trajectory_topic_, bus::topics::kTrajectory),
+      state_reader_(ctx.participant(), state_topic_, bus::topics::kRobotState),
+      command_writer_(ctx.participant(), command_topic_, bus::topics::kRobotCommand),
+      reply_reader_(ctx.participant(), reply_topic_, bus::topics::kRobotCommandReply) {
+  for (const auto& entry : config_.robots) {
+    auto model = kinematics::load_robot(entry.config);
+    if (!model) {
+      throw std::runtime_error(model.error().message);
+    }
+    if (model->id() != entry.id) {
+      throw std::runtime_error(fmt::format("robots: id '{}' but {} describes robot '{}'",
+                                           entry.id, entry.config, model->id()));
+    }
+    Robot robot;
+    robot.planner = std::make_unique<motion::Planner>(std::move(*model), config_.planner);
+    robots_.emplace(entry.id, std::move(robot));
+  }
+}
+
+void MotionService::publish(const std::string& motion_id, const cell_common_RequestId& request_id,
+                            const std::string& robot_id, cell_motion_MotionState state,
+                            const Error* error, double progress, double duration_s,
+                            const std::vector<Eigen::Isometry3d>* path,
+                            const std::vector<double>* final_joints) {
+  const std::string code = error != nullptr ? std::string(to_string(error->code)) : "";
+  const std::string reason = error != nullptr ? error->message : "";
+  std::vector<cell_common_Pose> poses;
+  if (path != nullptr) {
+    for (const auto& p : *path) {
+      poses.push_back(motion::to_idl(p));
+    }
+  }
+  cell_motion_MotionStatus s{};
+  s.motion_id = bus::borrow(motion_id);
+  s.request_id = request_id;
+  s.robot_id = bus::borrow(robot_id);
+  s.state = state;
+  s.error_code = bus::borrow(code);
+  s.reason = bus::borrow(reason);
+  s.progress = progress;
+  s.duration_s = duration_s;
+  bus::borrow(s.path, poses);
+  if (final_joints != nullptr) {
+    bus::borrow(s.final_joints_rad_or_mm, *final_joints);
+  }
+  if (auto st = status_writer_.write(s); !st) {
+    log::warn("status", st.error().message, {{"motion", motion_id}});
+  }
+}
+
+Result<motion::Plan> MotionService::plan(const cell_motion_MotionRequest& request,
+                                         Robot& robot) const {
+  const motion::Planner& planner = *robot.planner;
+  const int dof = planner.model().dof();
+  const double scale = request.speed_scale == 0.0 ? 1.0 : request.speed_scale;
+  const trajectory::JointVector& q0 = robot.view.q;
+  auto target = [&]() { return motion::from_idl(request.target); };
+  switch (request.kind) {
+    case cell_motion_MOTION_MOVE_JOINTS: {
+      const auto joints = bus::span(request.joints_rad_or_mm);
+      CELL_TRY(finite_joints(joints, dof, "joints"));
+      trajectory::JointVector q1(dof);
+      for (int j = 0; j < dof; ++j) {
+        q1[j] = joints[static_cast<std::size_t>(j)];
+      }
+      return planner.move_joints(q0, q1, scale);
+    }
+    case cell_motion_MOTION_MOVE_POSE: {
+      auto t = target();
+      if (!t) {
+        return std::move(t).error();
+      }
+      return planner.move_pose(q0, *t, std::string(bus::str(request.branch)), scale);
+    }
+    case cell_motion_MOTION_MOVE_LINEAR: {
+      auto t = target();
+      if (!t) {
+        return std::move(t).error();
+      }
+      return planner.move_linear(q0, *t, scale);
+    }
+    case cell_motion_MOTION_VIA_PATH: {
+      auto t = target();
+      if (!t) {
+        return std::move(t).error();
+      }
+      std::vector<Eigen::Isometry3d> via;
+      for (const auto& p : bus::span(request.via)) {
+        auto v = motion::from_idl(p);
+        if (!v) {
+          return with_context(std::move(v).error(), "via point");
+        }
+        via.push_back(*v);
+      }
+      return planner.via_path(q0, via, *t, scale);
+    }
+    case cell_motion_MOTION_APPROACH: {
+      auto t = target();
+      if (!t) {
+        return std::move(t).error();
+      }
+      return planner.approach(q0, *t, request.distance_mm, scale);
+    }
+    case cell_motion_MOTION_DEPART:
+      return planner.depart(q0, request.distance_mm, scale);
+    case cell_motion_MOTION_PICK:
+    case cell_motion_MOTION_PLACE: {
+      auto t = target();
+      if (!t) {
+        return std::move(t).error();
+      }
+      return planner.pick_or_place(q0, *t, request.distance_mm,
+                                   request.kind == cell_motion_MOTION_PICK, scale);
+    }
+    case cell_motion_MOTION_TRACK: {
+      auto t = target();
+      if (!t) {
+        return std::move(t).error();
+      }
+      return planner.track(q0, *t, request.alter_cumulative, request.alter_world_frame, scale);
+    }
+    default:
+      return Error{Errc::kInvalidArgument,
+                   fmt::format("unknown motion kind {}", static_cast<int>(request.kind))};
+  }
+}
+
+void MotionService::send_command(const std::string& robot_id, cell_robot_RobotCommandKind kind) {
+  const std::string operator_id = config_.common.service_id;
+  cell_robot_RobotCommand c{};
+  c.request_id.client_id = bus::borrow(client_id_);
+  c.request_id.seq = ++seq_;
+  c.robot_id = bus::borrow(robot_id);
+  c.kind = kind;
+  c.operator_id = bus::borrow(operator_id);
+  if (auto s = command_writer_.write(c); !s) {
+    log::warn("command", s.error().message);
+  }
+}
+
+void MotionService::handle_request(const cell_motion_MotionRequest& request) {
+  const std::string motion_id(bus::str(request.motion_id));
+  const std::string robot_id(bus::str(request.robot_id));
+  const std::string kind(to_string(request.kind));
+  auto refuse = [&](Error error) {
+    log::warn("refuse", error.message, {{"motion", motion_id}, {"robot", robot_id}, {"kind", kind}});
+    publish(motion_id, request.request_id, robot_id, cell_motion_MOTION_REFUSED, &error);
+  };
+  if (motion_id.empty()) {
+    refuse(Error{Errc::kInvalidArgument, "motion_id is empty"});
+    return;
+  }
+  auto it = robots_.find(robot_id);
+  if (it == robots_.end()) {
+    std::string known;
+    for (const auto& [id, r] : robots_) {
+      known += (known.empty() ? "" : ", ") + id;
+    }
+    refuse(Error{Errc::kInvalidArgument,
+                 fmt::format("unknown robot '{}' (this motion service plans for: {})", robot_id,
+                             known)});
+    return;
+  }
+  Robot& robot = it->second;
+  if (request.kind == cell_motion_MOTION_STOP || request.kind == cell_motion_MOTION_ALTER_OFF) {
+    send_command(robot_id, request.kind == cell_motion_MOTION_STOP ? cell_robot_CMD_STOP
+                                                                    : cell_robot_CMD_ALTER_OFF);
+    publish(motion_id, request.request_id, robot_id, cell_motion_MOTION_DONE);
+    return;
+  }
+  if (!(request.speed_scale >= 0 && request.speed_scale <= 1)) {
+    refuse(Error{Errc::kInvalidArgument,
+                 fmt::format("speed_scale must be in (0, 1] (0 means 1), got {}",
+                             request.speed_scale)});
+    return;
+  }
+  if (robot.view.received == SteadyTime{} || seconds_since(robot.view.received) > config_.state_timeout_s) {
+    refuse(Error{Errc::kNotReady,
+                 fmt::format("no state from robot '{}' for {:.1f} s: is its gateway running?",
+                             robot_id,
+                             robot.view.received == SteadyTime{} ? INFINITY
+                                                                 : seconds_since(robot.view.received))});
+    return;
+  }
+  if (robot.active && !request.preview_only) {
+    refuse(Error{Errc::kNotReady, fmt::format("robot '{}' is busy with motion '{}'", robot_id,
+                                              robot.active->motion_id)});
+    return;
+  }
+  if (robot.view.mode == cell_robot_MODE_FAULT && !request.preview_only) {
+    refuse(Error{Errc::kNotReady,
+                 fmt::format("robot '{}' is in fault: {}", robot_id, robot.view.fault_text)});
+    return;
+  }
+  auto planned = [&]() -> Result<motion::Plan> {
+    try {
+      return plan(request, robot);
+    } catch (const std::exception& e) {  // the boundary: nothing escapes into the loop
+      return Error{Errc::kInvalidArgument, std::string("planning failed: ") + e.what()};
+    }
+  }();
+  if (!planned) {
+    refuse(std::move(planned).error());
+    return;
+  }
+  const double duration = planned->trajectory.duration_s();
+  if (request.preview_only) {
+    const auto path = sample_path(*planned, robot.planner->model());
+    const auto& end = planned->trajectory.end();
+    const std::vector<double> final_joints(end.data(), end.data() + end.size());
+    publish(motion_id, request.request_id, robot_id, cell_motion_MOTION_PREVIEW, nullptr, 0.0,
+            duration, &path, &final_joints);
+    log::info("preview", "planned", {{"motion", motion_id}, {"kind", kind},
+                                     {"duration_s", fmt::format("{:.3f}", duration)}});
+    return;
+  }
+  Active active;
+  active.motion_id = motion_id;
+  active.robot_id = robot_id;
+  active.client_id = std::string(bus::str(request.request_id.client_id));
+  active.request_id = request.request_id;
+  active.request_id.client_id = nullptr;  // re-pointed at active.client_id when publishing
+  active.trajectory_id = fmt::format("{}#{}", motion_id, ++seq_);
+  active.gateway_seq = seq_;
+  active.sent = steady_clock::now();
+  active.duration_s = duration;
+  const auto& end = planned->trajectory.end();
+  active.final_joints.assign(end.data(), end.data() + end.size());
+
+  motion::TrajectoryWire wire;
+  motion::to_idl(*planned, robot_id, active.trajectory_id, motion_id, wire);
+  wire.message.request_id.client_id = bus::borrow(client_id_);
+  wire.message.request_id.seq = active.gateway_seq;
+  wire.message.header.stamp_ns = wall_time_ns();
+  if (auto s = trajectory_writer_.write(wire.message); !s) {
+    refuse(Error{Errc::kBus, s.error().message});
+    return;
+  }
+  robot.active = std::move(active);
+  cell_common_RequestId id = robot.active->request_id;
+  id.client_id = bus::borrow(robot.active->client_id);
+  publish(motion_id, id, robot_id, cell_motion_MOTION_ACCEPTED, nullptr, 0.0, duration);
+  log::info("accept", "trajectory sent",
+            {{"motion", motion_id}, {"kind", kind}, {"robot", robot_id},
+             {"duration_s", fmt::format("{:.3f}", duration)}});
+}
+
+void MotionService::finish(Robot& robot, cell_motion_MotionState state, const Error* error) {
+  Active& a = *robot.active;
+  cell_common_RequestId id = a.request_id;
+  id.client_id = bus::borrow(a.client_id);
+  publish(a.motion_id, id, a.robot_id, state, error, state == cell_motion_MOTION_DONE ? 1.0 : robot.view.progress,
+          a.duration_s, nullptr, &a.final_joints);
+  log::info("finish", state == cell_motion_MOTION_DONE ? "done" : "failed",
+            {{"motion", a.motion_id}, {"reason", error != nullptr ? error->message : ""}});
+  finished_.push_back(a.motion_id);
+  while (static_cast<int>(finished_.size()) > config_.keep_finished) {
+    // Forget old motions so the transient-local status topic does not grow without bound.
+    const std::string old = finished_.front();
+    finished_.pop_front();
+    cell_motion_MotionStatus key{};
+    key.motion_id = bus::borrow(old);
+    (void)status_writer_.unregister(key);
+  }
+  robot.active.reset();
+}
+
+void MotionService::handle_state(const cell_robot_RobotState& state) {
+  auto it = robots_.find(std::string(bus::str(state.robot_id)));
+  if (it == robots_.end()) {
+    return;
+  }
+  Robot& robot = it->second;
+  const auto q = bus::span(state.position_rad_or_mm);
+  if (static_cast<int>(q.size()) != robot.planner->model().dof()) {
+    return;  // a gateway configured for another model: ignore rather than plan from garbage
+  }
+  RobotView& v = robot.view;
+  v.q.resize(static_cast<Eigen::Index>(q.size()));
+  for (std::size_t j = 0; j < q.size(); ++j) {
+    v.q[static_cast<Eigen::Index>(j)] = q[j];
+  }
+  v.mode = state.mode;
+  v.homed = state.homed;
+  v.moving = state.moving;
+  v.tracking = state.tracking;
+  v.trajectory_id = bus::str(state.trajectory_id);
+  v.progress = state.trajectory_progress;
+  v.fault_text = bus::str(state.fault_text);
+  v.received = steady_clock::now();
+}
+
+void MotionService::handle_gateway_reply(const cell_robot_RobotCommandReply& reply) {
+  if (bus::str(reply.request_id.client_id) != client_id_) {
+    return;
+  }
+  for (auto& [id, robot] : robots_) {
+    if (!robot.active || robot.active->gateway_seq != reply.request_id.seq) {
+      continue;
+    }
+    if (reply.status.accepted) {
+      robot.active->gateway_accepted = true;
+    } else {
+      const Error error{Errc::kNotReady, fmt::format("gateway of '{}' refused the trajectory: {}",
+                                                     id, bus::str(reply.status.reason))};
+      finish(robot, cell_motion_MOTION_FAILED, &error);
+    }
+  }
+}
+
+void MotionService::supervise() {
+  for (auto& [id, robot] : robots_) {
+    if (!robot.active) {
+      continue;
+    }
+    Active& a = *robot.active;
+    const RobotView& v = robot.view;
+    if (!a.gateway_accepted) {
+      if (seconds_since(a.sent) > config_.gateway_timeout_s) {
+        const Error error{Errc::kTimeout,
+                          fmt::format("gateway of '{}' did not accept the trajectory within "
+                                      "{:.1f} s",
+                                      id, config_.gateway_timeout_s)};
+        finish(robot, cell_motion_MOTION_FAILED, &error);
+      }
+      continue;
+    }
+    if (seconds_since(v.received) > config_.state_timeout_s) {
+      const Error error{Errc::kTimeout, fmt::format("lost the state of robot '{}' for {:.1f} s",
+                                                    id, seconds_since(v.received))};
+      finish(robot, cell_motion_MOTION_FAILED, &error);
+      continue;
+    }
+    if (v.trajectory_id != a.trajectory_id) {
+      continue;  // the gateway has not started it yet
+    }
+    if (v.mode == cell_robot_MODE_FAULT) {
+      const Error error{Errc::kProtocol, fmt::format("robot '{}' faulted: {}", id, v.fault_text)};
+      finish(robot, cell_motion_MOTION_FAILED, &error);
+    } else if (v.mode == cell_robot_MODE_STOPPED) {
+      const Error error{Errc::kNotReady, fmt::format("robot '{}' was stopped", id)};
+      finish(robot, cell_motion_MOTION_FAILED, &error);
+    } else if (!v.moving || v.tracking) {
+      finish(robot, cell_motion_MOTION_DONE, nullptr);
+    } else if (seconds_since(a.last_status) >= 1.0 / config_.status_rate_hz) {
+      cell_common_RequestId rid = a.request_id;
+      rid.client_id = bus::borrow(a.client_id);
+      publish(a.motion_id, rid, a.robot_id, cell_motion_MOTION_RUNNING, nullptr, v.progress,
+              a.duration_s);
+      a.last_status = steady_clock::now();
+    }
+  }
+}
+
+void MotionService::run(service::Context& ctx) {
+  bus::WaitSet waitset(ctx.participant());
+  waitset.attach(ctx.stop_guard().get(), kStop);
+  waitset.attach(request_reader_.condition(), kRequest);
+  waitset.attach(state_reader_.condition(), kState);
+  waitset.attach(reply_reader_.condition(), kReply);
+  ctx.health().set(cell_health_HEALTH_SERVING);
+  for (;;) {
+    const bus::Fired fired = waitset.wait(std::chrono::milliseconds(50));
+    if (fired.contains(kStop)) {
+      break;
+    }
+    (void)state_reader_.take_each(
+        [&](const cell_robot_RobotState& s, const dds_sample_info_t&) { handle_state(s); });
+    (void)reply_reader_.take_each([&](const cell_robot_RobotCommandReply& r,
+                                      const dds_sample_info_t&) { handle_gateway_reply(r); });
+    (void)request_reader_.take_each([&](const cell_motion_MotionRequest& r,
+                                        const dds_sample_info_t&) { handle_request(r); });
+    supervise();
+    ctx.health().tick();
+  }
+  // Answer what is still running: the robot goes on, but this service stops watching it.
+  for (auto& [id, robot] : robots_) {
+    if (robot.active) {
+      const Error error{Errc::kNotReady, "motion service stopped while the motion ran"};
+      finish(robot, cell_motion_MOTION_FAILED, &error);
+    }
+  }
+}
+
+}  // namespace cell::motion_service
