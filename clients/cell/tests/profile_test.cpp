@@ -2,6 +2,8 @@
 
 #include <cstdlib>
 
+#include <filesystem>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -87,7 +89,13 @@ TEST(Profile, TheShippedLocalProfileLoads) {
   ASSERT_THAT(profile, IsOk());
   EXPECT_EQ(profile->name, "local");
   ASSERT_FALSE(profile->services.empty());
-  EXPECT_EQ(profile->services[0].name, "echo");
+  // Every service names an executable this build makes and a config file that exists.
+  for (const auto& svc : profile->services) {
+    EXPECT_TRUE(std::filesystem::exists(cell::testing::bin_path(svc.exec)))
+        << svc.name << ": " << svc.exec << " was not built";
+    EXPECT_TRUE(std::filesystem::exists(cell::testing::source_dir() + "/" + svc.config))
+        << svc.name << ": " << svc.config << " is missing";
+  }
 }
 
 TEST(Profile, UnknownKeyIsNamedWithFileLineAndColumn) {

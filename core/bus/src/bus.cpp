@@ -1,5 +1,8 @@
 #include <unistd.h>
 
+#include <atomic>
+#include <random>
+
 #include <fmt/format.h>
 
 #include "cell/bus/entity.hpp"
@@ -241,9 +244,14 @@ bool wait_readable(dds_entity_t participant, dds_entity_t condition,
 }  // namespace detail
 
 std::string make_client_id(std::string_view name) {
+  // Unique per call, not just per process: replies live on transient-local topics, so a second
+  // requester in the same process (or a later process that got the same pid) must never take
+  // an earlier requester's reply for its own.
+  static std::atomic<std::uint32_t> counter{0};
+  static const std::uint32_t nonce = std::random_device{}();
   char host[256] = {};
   gethostname(host, sizeof host - 1);
-  return fmt::format("{}@{}:{}", name, host, getpid());
+  return fmt::format("{}@{}:{}.{}.{:08x}", name, host, getpid(), counter.fetch_add(1), nonce);
 }
 
 }  // namespace cell::bus

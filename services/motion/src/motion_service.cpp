@@ -451,6 +451,28 @@ void MotionService::supervise() {
   }
 }
 
+void MotionService::take_requests() {
+  auto fresh = request_reader_.take_copies(64);
+  if (fresh) {
+    for (auto& r : *fresh) {
+      waiting_.push_back(Waiting{std::move(r), steady_clock::now()});
+    }
+  }
+  std::vector<Waiting> still;
+  for (auto& w : waiting_) {
+    const cell_motion_MotionRequest& r = w.request.get();
+    auto it = robots_.find(std::string(bus::str(r.robot_id)));
+    const bool no_state_yet = it != robots_.end() && it->second.view.received == SteadyTime{};
+    if (no_state_yet && seconds_since(w.since) < config_.state_timeout_s &&
+        r.kind != cell_motion_MOTION_STOP && r.kind != cell_motion_MOTION_ALTER_OFF) {
+      still.push_back(std::move(w));
+      continue;
+    }
+    handle_request(r);
+  }
+  waiting_ = std::move(still);
+}
+
 void MotionService::run(service::Context& ctx) {
   bus::WaitSet waitset(ctx.participant());
   waitset.attach(ctx.stop_guard().get(), kStop);
@@ -467,8 +489,7 @@ void MotionService::run(service::Context& ctx) {
         [&](const cell_robot_RobotState& s, const dds_sample_info_t&) { handle_state(s); });
     (void)reply_reader_.take_each([&](const cell_robot_RobotCommandReply& r,
                                       const dds_sample_info_t&) { handle_gateway_reply(r); });
-    (void)request_reader_.take_each([&](const cell_motion_MotionRequest& r,
-                                        const dds_sample_info_t&) { handle_request(r); });
+    take_requests();
     supervise();
     ctx.health().tick();
   }

@@ -85,6 +85,14 @@ class MotionService {
   std::uint64_t seq_ = 0;
   std::map<std::string, Robot> robots_;
   std::deque<std::string> finished_;  // motion ids, oldest first (disposed beyond keep_finished)
+  /// Requests for a robot whose state has not arrived yet (the cell just started): held up to
+  /// state_timeout_s, then answered either way.
+  struct Waiting {
+    bus::Owned<cell_motion_MotionRequest> request;
+    SteadyTime since;
+  };
+  std::vector<Waiting> waiting_;
+  void take_requests();
 
   bus::Topic<cell_motion_MotionRequest> request_topic_;
   bus::Topic<cell_motion_MotionStatus> status_topic_;

@@ -15,7 +15,7 @@
 /// reply came in time.
 namespace cell::bus {
 
-/// A client id unique across hosts and processes: "<name>@<host>:<pid>".
+/// A client id unique across hosts, processes and calls: "<name>@<host>:<pid>.<n>.<nonce>".
 std::string make_client_id(std::string_view name);
 
 /// True when `id` names this client and sequence.
