@@ -127,7 +127,8 @@ TEST(Planner, ExcaliburApproachesAlongTheToolAxis) {
 
 /// ALTER with a real SCARA picker (links 325/275 mm, config/robots/scara_picker.yaml): the belt
 /// runs along -y under the robot; the part is located at t = 0 (encoder latched at exposure);
-/// the robot moves in a straight line to where it was and a
+/// the robot moves in a straight line (within its joint speed and acceleration limits) to
+/// where it was and a
 /// tracker sends the belt's total travel every `cycle_s` with its rate. Returns the worst
 /// tool-to-part distance from arrival through 0.2 s of gripper closing.
 double picker_tracking_error(double belt_mm_s, double cycle_s) {
@@ -137,15 +138,16 @@ double picker_tracking_error(double belt_mm_s, double cycle_s) {
   options.linear.max_accel_mm_s2 = 20000;
   const Planner planner(model, options);
   constexpr double kMmPerCount = 50.0 * std::numbers::pi / 4096;  // digest 002 T9, x4 decoding
-  // The belt runs along -y at x = 300 mm: reachable for |y| < 516 mm. The part is located at
-  // y = 430 (upstream); the robot waits over the belt at y = 250.
-  const Eigen::Vector3d part0(300, 430, -150);
+  // The belt runs along -y at x = 300 mm: reachable for |y| < 516 mm, so at 2 m/s a part is
+  // in reach for half a second. It is located at y = 500 (upstream); the robot waits over the
+  // belt at y = 450, at the grasp height.
+  const Eigen::Vector3d part0(300, 500, -150);
   auto part_at = [&](double t) -> Eigen::Vector3d {
     return part0 + Eigen::Vector3d(0, -belt_mm_s * t, 0);
   };
   auto counts = [&](double t) { return std::floor(belt_mm_s * t / kMmPerCount); };
   trajectory::JointVector q0 =
-      model.inverse(scara_pose(300, 250, -100, 0), jv({0, 0, 0, 0})).value();
+      model.inverse(scara_pose(300, 450, -150, 0), jv({0, 0, 0, 0})).value();
   auto plan = planner.track(q0, scara_pose(part0.x(), part0.y(), part0.z(), 0), false, true, 1.0);
   EXPECT_THAT(plan, IsOk());
   trajectory::TrajectoryExecutor exec(forward_fn(model), inverse_fn(model));

@@ -225,6 +225,19 @@ Status check_limits(const JointTrajectory& trajectory, const JointLimits& limits
     const double h = b.t_s - a.t_s;
     for (Eigen::Index j = 0; j < trajectory.dof(); ++j) {
       const Hermite c{a.q[j], a.qd[j], b.q[j], b.qd[j], h};
+      // A cubic's acceleration is linear in time: its extremes are at the segment's ends.
+      for (const double s : {0.0, 1.0}) {
+        const double qdd = c.acc(s);
+        if (std::abs(qdd) > limits.max_acceleration[j] * (1.0 + velocity_tolerance) + 1e-9) {
+          const auto js = static_cast<std::size_t>(j);
+          return Error{Errc::kOutOfRange,
+                       fmt::format("segment {} at t={:.3f} s: joint {} acceleration {}/s^2 exceeds "
+                                   "its limit {}/s^2",
+                                   i, a.t_s + s * h, limits.names[js],
+                                   format_joint(std::abs(qdd), limits.prismatic[js]),
+                                   format_joint(limits.max_acceleration[j], limits.prismatic[js]))};
+        }
+      }
       double c1 = 0;
       double c2 = 0;
       double c3 = 0;

@@ -327,12 +327,32 @@ Result<JointTrajectory> plan_linear_move(const JointVector& q0, const Eigen::Iso
     if (!trajectory) {
       return trajectory;
     }
+    // Joint accelerations (at the Hermite segments' ends, where a cubic's are largest): a
+    // time scaling by f scales them by f^2.
+    double worst_accel = 0;
+    const auto& built = trajectory->knots();
+    for (std::size_t i = 0; i + 1 < built.size(); ++i) {
+      const double h = built[i + 1].t_s - built[i].t_s;
+      for (Eigen::Index j = 0; j < n; ++j) {
+        const double dq = built[i + 1].q[j] - built[i].q[j];
+        const double a0 = (6 * dq / h - 4 * built[i].qd[j] - 2 * built[i + 1].qd[j]) / h;
+        const double a1 = (-6 * dq / h + 2 * built[i].qd[j] + 4 * built[i + 1].qd[j]) / h;
+        worst_accel = std::max(worst_accel, std::max(std::abs(a0), std::abs(a1)) /
+                                                limits.max_acceleration[j]);
+      }
+    }
+    if (worst_accel > 1.0) {
+      const double f = 1.0 / std::sqrt(worst_accel * 1.02);
+      v_s *= f;
+      a_s *= f * f;
+      continue;
+    }
     CELL_TRY(check_limits(*trajectory, limits, 0.05));
     return trajectory;
   }
   return Error{Errc::kOutOfRange,
-               "straight line needs joint speeds beyond the limits even when slowed down 8 times "
-               "(it passes too close to a singularity)"};
+               "straight line needs joint speeds or accelerations beyond the limits even when "
+               "slowed down 8 times (it passes too close to a singularity)"};
 }
 
 }  // namespace cell::trajectory

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "cell/common/result.hpp"
 #include "cell/kinematics/joints.hpp"
@@ -42,13 +43,21 @@ enum class DriverCommand : std::uint8_t {
   kHome,
   kGripperOpen,
   kGripperClose,
-  kLights,     ///< uses halogen_on / fluorescent_on
-  kReset,      ///< clear controller faults
+  kLights,        ///< uses halogen_on / fluorescent_on
+  kReset,         ///< clear controller faults
+  kSetGains,      ///< uses kp, kv (one per joint): servo gains editable at run time
+  kSetMode,       ///< uses mode (Excalibur: host, manual, teach, playback)
+  kSetTolerance,  ///< uses tolerance_rad (Excalibur position check)
 };
 
+/// Arguments of a DriverCommand (only those of the command are meaningful).
 struct CommandArgs {
   bool halogen_on = false;
   bool fluorescent_on = false;
+  std::vector<double> kp;
+  std::vector<double> kv;
+  cell_robot_RobotMode mode = cell_robot_MODE_IDLE;
+  double tolerance_rad = 0.0;
 };
 
 /// Name, joint count and cycle of a driver.
@@ -81,6 +90,10 @@ class RobotDriver {
   /// Starts a non-cyclic command; progress shows in JointState (busy, homed, gripper).
   /// Errors: kNotReady when the controller cannot take it now (moving, faulted), with why.
   virtual Status command(DriverCommand command, const CommandArgs& args) = 0;
+
+  /// Whether the controller has this command at all (an unsupported one is refused at once,
+  /// before it is queued).
+  virtual bool supports(DriverCommand /*command*/) const noexcept { return true; }
 
   /// Meaning of fault bits, e.g. "J1 positive overrun; torques late (0x1000)".
   virtual std::string describe_faults(std::uint32_t bits) const = 0;

@@ -20,13 +20,14 @@ Result<GatewayConfig> load_config(const config::Document& doc) {
   root.optional("start_tolerance_mm", c.start_tolerance_mm);
   config::MapReader driver = root.child("driver");
   driver.required("kind", c.driver_kind);
-  driver.optional("initial_joints", c.initial_joints_display);
-  driver.optional("gripper_time_s", c.gripper_time_s);
-  if (c.driver_kind != "ideal") {
-    driver.fail("kind", fmt::format("unknown driver '{}' (known: ideal)", c.driver_kind));
-  }
-  if (!(c.gripper_time_s >= 0 && c.gripper_time_s <= 10)) {
-    driver.fail("gripper_time_s", fmt::format("must be in [0, 10], got {}", c.gripper_time_s));
+  if (const DriverParser parse = find_driver(c.driver_kind); parse != nullptr) {
+    c.make_driver = parse(driver);
+  } else if (!c.driver_kind.empty()) {
+    std::string known;
+    for (const auto& d : driver_kinds()) {
+      known += fmt::format("{}{}", known.empty() ? "" : ", ", d.name);
+    }
+    driver.fail("kind", fmt::format("unknown driver '{}' (known: {})", c.driver_kind, known));
   }
   root.absorb(driver);
   if (!(c.cycle_hz >= 10 && c.cycle_hz <= 4000)) {

@@ -6,6 +6,7 @@
 #include "cell/config/yaml.hpp"
 #include "cell/kinematics/robot_model.hpp"
 #include "cell/service/common_config.hpp"
+#include "drivers.hpp"
 
 namespace cell::gateway {
 
@@ -19,9 +20,8 @@ namespace cell::gateway {
 ///   start_tolerance_deg: 0.5  # a trajectory must start this close to the current setpoint
 ///   start_tolerance_mm: 0.5
 ///   driver:
-///     kind: ideal             # ideal (more drivers come with the gateway issue)
-///     initial_joints: [0, 0, 0, 0]   # deg for revolute joints, mm for prismatic (ideal)
-///     gripper_time_s: 0.5     # ideal: time to open or close
+///     kind: ideal             # one of drivers.cpp's table; the other keys are the driver's
+///     ...                     # own (see each driver's header and the gateway README)
 struct GatewayConfig {
   service::CommonConfig common;
   std::string robot_config;
@@ -30,9 +30,8 @@ struct GatewayConfig {
   int realtime_priority = 0;
   double start_tolerance_rad = 0.5 * 3.141592653589793 / 180.0;
   double start_tolerance_mm = 0.5;
-  std::string driver_kind = "ideal";
-  std::vector<double> initial_joints_display;  ///< deg / mm as the robot's joints say
-  double gripper_time_s = 0.5;
+  std::string driver_kind;
+  DriverFactory make_driver;  ///< from the driver's parser; builds it once the robot is known
 };
 
 /// Parses a gateway config (robot_config is resolved against CELL_HOME when relative).

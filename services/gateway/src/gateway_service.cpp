@@ -14,7 +14,6 @@
 #include "cell/common/time.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/motion/wire.hpp"
-#include "ideal_driver.hpp"
 
 namespace cell::gateway {
 namespace {
@@ -38,31 +37,6 @@ timespec to_timespec(std::int64_t ns) {
 
 }  // namespace
 
-Result<std::unique_ptr<RobotDriver>> make_driver(const GatewayConfig& config,
-                                                 const kinematics::RobotModel& model) {
-  const auto cycle = std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / config.cycle_hz));
-  if (config.driver_kind == "ideal") {
-    JointVector q0 = JointVector::Zero(model.dof());
-    if (!config.initial_joints_display.empty()) {
-      if (static_cast<int>(config.initial_joints_display.size()) != model.dof()) {
-        return Error{Errc::kConfig,
-                     fmt::format("driver.initial_joints has {} values, robot '{}' has {} joints",
-                                 config.initial_joints_display.size(), model.id(), model.dof())};
-      }
-      for (int j = 0; j < model.dof(); ++j) {
-        q0[j] = model.joints()[static_cast<std::size_t>(j)].from_display(
-            config.initial_joints_display[static_cast<std::size_t>(j)]);
-      }
-    }
-    if (auto s = model.check_limits(q0); !s) {
-      return with_context(s.error(), "driver.initial_joints");
-    }
-    return std::unique_ptr<RobotDriver>(
-        std::make_unique<IdealDriver>(model.dof(), q0, config.gripper_time_s, cycle));
-  }
-  return Error{Errc::kConfig, "unknown driver '" + config.driver_kind + "'"};
-}
-
 GatewayService::GatewayService(service::Context& ctx, const GatewayConfig& config)
     : ctx_(ctx),
       config_(config),
@@ -79,7 +53,8 @@ GatewayService::GatewayService(service::Context& ctx, const GatewayConfig& confi
       reply_writer_(ctx.participant(), reply_topic_, bus::topics::kRobotCommandReply),
       state_writer_(ctx.participant(), state_topic_, bus::topics::kRobotState),
       latest_writer_(ctx.participant(), latest_topic_, bus::topics::kRobotStateLatest) {
-  auto driver = make_driver(config_, model_);
+  const auto cycle = std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / config_.cycle_hz));
+  auto driver = config_.make_driver(DriverSetup{model_, cycle});
   if (!driver) {
     throw std::runtime_error(driver.error().message);
   }
@@ -227,6 +202,10 @@ void GatewayService::handle_command(const cell_robot_RobotCommand& message) {
   CommandArgs args;
   args.halogen_on = message.halogen_on;
   args.fluorescent_on = message.fluorescent_on;
+  args.kp = bus::to_vector(message.kp);
+  args.kv = bus::to_vector(message.kv);
+  args.mode = message.mode;
+  args.tolerance_rad = message.tolerance_rad;
   const Status status = servo_->post_command(message.kind, args);
   log::info("command", status ? "accepted" : status.error().message,
             {{"kind", std::to_string(static_cast<int>(message.kind))},

@@ -15,10 +15,6 @@
 
 namespace cell::gateway {
 
-/// Builds the driver a config names.
-Result<std::unique_ptr<RobotDriver>> make_driver(const GatewayConfig& config,
-                                                 const kinematics::RobotModel& model);
-
 /// One robot's gateway: the servo thread (cycle_hz) runs Servo::cycle and publishes
 /// RobotState every 1/state_rate_hz; the main thread serves the bus: Trajectory and
 /// RobotCommand (answered on cell/robot/command_reply), AlterCorrection, and turns servo

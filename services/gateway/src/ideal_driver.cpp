@@ -1,5 +1,7 @@
 #include "ideal_driver.hpp"
 
+#include <fmt/format.h>
+
 namespace cell::gateway {
 
 IdealDriver::IdealDriver(int dof, JointVector initial_q, double gripper_time_s,
@@ -56,8 +58,47 @@ Status IdealDriver::command(DriverCommand command, const CommandArgs& /*args*/) 
     case DriverCommand::kLights:
     case DriverCommand::kReset:
       return ok_status();
+    default:
+      return Error{Errc::kInvalidArgument, "the ideal robot has no gains, modes or tolerance"};
   }
   return Error{Errc::kInvalidArgument, "unknown driver command"};
+}
+
+bool IdealDriver::supports(DriverCommand command) const noexcept {
+  return command != DriverCommand::kSetGains && command != DriverCommand::kSetMode &&
+         command != DriverCommand::kSetTolerance;
+}
+
+DriverFactory parse_ideal_driver(config::MapReader& section) {
+  std::vector<double> initial;
+  double gripper_time_s = 0.5;
+  section.optional("initial_joints", initial);
+  section.optional("gripper_time_s", gripper_time_s);
+  if (!(gripper_time_s >= 0 && gripper_time_s <= 10)) {
+    section.fail("gripper_time_s", fmt::format("must be in [0, 10], got {}", gripper_time_s));
+  }
+  const std::string where = section.where("initial_joints");
+  return [initial, gripper_time_s, where](
+             const DriverSetup& setup) -> Result<std::unique_ptr<RobotDriver>> {
+    const auto& model = setup.model;
+    JointVector q0 = JointVector::Zero(model.dof());
+    if (!initial.empty()) {
+      if (static_cast<int>(initial.size()) != model.dof()) {
+        return Error{Errc::kConfig,
+                     fmt::format("{}: driver.initial_joints has {} values, robot '{}' has {} joints",
+                                 where, initial.size(), model.id(), model.dof())};
+      }
+      for (int j = 0; j < model.dof(); ++j) {
+        q0[j] = model.joints()[static_cast<std::size_t>(j)].from_display(
+            initial[static_cast<std::size_t>(j)]);
+      }
+    }
+    if (auto s = model.check_limits(q0); !s) {
+      return with_context(s.error(), where + ": driver.initial_joints");
+    }
+    return std::unique_ptr<RobotDriver>(
+        std::make_unique<IdealDriver>(model.dof(), q0, gripper_time_s, setup.cycle));
+  };
 }
 
 std::string IdealDriver::describe_faults(std::uint32_t bits) const {

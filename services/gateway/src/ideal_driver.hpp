@@ -1,6 +1,7 @@
 #pragma once
 
 #include "driver.hpp"
+#include "drivers.hpp"
 
 namespace cell::gateway {
 
@@ -20,6 +21,7 @@ class IdealDriver final : public RobotDriver {
   CycleStatus read(Clock::time_point now, JointState& state) override;
   CycleStatus write(Clock::time_point now, const JointSetpoint& setpoint) override;
   Status command(DriverCommand command, const CommandArgs& args) override;
+  bool supports(DriverCommand command) const noexcept override;
   std::string describe_faults(std::uint32_t bits) const override;
   const DriverInfo& info() const noexcept override { return info_; }
 
@@ -33,5 +35,8 @@ class IdealDriver final : public RobotDriver {
   Clock::time_point last_now_{};
   bool homed_ = false;
 };
+
+/// `driver: {kind: ideal, initial_joints: [deg or mm per joint], gripper_time_s: 0.5}`.
+DriverFactory parse_ideal_driver(config::MapReader& section);
 
 }  // namespace cell::gateway

@@ -144,6 +144,27 @@ void Servo::post_alter(trajectory::AlterCorrection correction, Clock::time_point
 }
 
 Status Servo::post_command(cell_robot_RobotCommandKind kind, const CommandArgs& args) {
+  const auto unsupported = [&](DriverCommand c) -> Status {
+    if (!driver_->supports(c)) {
+      return Error{Errc::kInvalidArgument,
+                   fmt::format("'{}' is not supported by the {} driver", command_name(kind),
+                               driver_->info().name)};
+    }
+    return ok_status();
+  };
+  switch (kind) {
+    case cell_robot_CMD_SET_GAINS:
+      CELL_TRY(unsupported(DriverCommand::kSetGains));
+      break;
+    case cell_robot_CMD_SET_MODE:
+      CELL_TRY(unsupported(DriverCommand::kSetMode));
+      break;
+    case cell_robot_CMD_SET_TOLERANCE:
+      CELL_TRY(unsupported(DriverCommand::kSetTolerance));
+      break;
+    default:
+      break;
+  }
   std::lock_guard lock(mutex_);
   const bool moving = snapshot_.moving || pending_.plan.has_value();
   switch (kind) {
@@ -168,12 +189,31 @@ Status Servo::post_command(cell_robot_RobotCommandKind kind, const CommandArgs& 
                                                   command_name(kind), snapshot_.fault_text)};
       }
       break;
-    case cell_robot_CMD_SET_MODE:
     case cell_robot_CMD_SET_GAINS:
+      if (static_cast<int>(args.kp.size()) != model_.dof() ||
+          static_cast<int>(args.kv.size()) != model_.dof()) {
+        return Error{Errc::kInvalidArgument,
+                     fmt::format("set gains needs {} kp and {} kv values, got {} and {}",
+                                 model_.dof(), model_.dof(), args.kp.size(), args.kv.size())};
+      }
+      for (std::size_t j = 0; j < args.kp.size(); ++j) {
+        if (!std::isfinite(args.kp[j]) || !std::isfinite(args.kv[j]) || args.kp[j] < 0 ||
+            args.kv[j] < 0) {
+          return Error{Errc::kInvalidArgument,
+                       fmt::format("gains of joint {} must be finite and >= 0", j)};
+        }
+      }
+      break;
     case cell_robot_CMD_SET_TOLERANCE:
-      return Error{Errc::kInvalidArgument,
-                   fmt::format("'{}' is not supported by the {} driver", command_name(kind),
-                               driver_->info().name)};
+      if (!(args.tolerance_rad > 0) || !std::isfinite(args.tolerance_rad)) {
+        return Error{Errc::kInvalidArgument, "tolerance must be > 0"};
+      }
+      break;
+    case cell_robot_CMD_SET_MODE:
+      if (moving) {
+        return Error{Errc::kNotReady, "cannot change mode while the robot moves"};
+      }
+      break;
     default:
       return Error{Errc::kInvalidArgument,
                    fmt::format("unknown command kind {}", static_cast<int>(kind))};
@@ -242,6 +282,15 @@ void Servo::apply_commands(
         break;
       case cell_robot_CMD_ALTER_OFF:
         executor_.alter_off();
+        break;
+      case cell_robot_CMD_SET_GAINS:
+        status = driver_->command(DriverCommand::kSetGains, args);
+        break;
+      case cell_robot_CMD_SET_MODE:
+        status = driver_->command(DriverCommand::kSetMode, args);
+        break;
+      case cell_robot_CMD_SET_TOLERANCE:
+        status = driver_->command(DriverCommand::kSetTolerance, args);
         break;
       default:
         break;

@@ -1,5 +1,6 @@
 #include "gateway_service.hpp"
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -18,14 +19,30 @@ using namespace std::chrono_literals;
 using Harness = cell::testing::ServiceHarness<GatewayConfig, GatewayService>;
 
 GatewayConfig ideal_config() {
-  GatewayConfig c;
-  c.common.service_id = "gateway.ibm7545";
-  c.robot_config = cell::testing::source_dir() + "/config/robots/ibm7545.yaml";
-  c.cycle_hz = 1000;
-  c.state_rate_hz = 100;
-  c.initial_joints_display = {45, 105, 0, 0};
-  c.gripper_time_s = 0.05;
-  return c;
+  const std::string yaml = fmt::format(
+      "service: {{id: gateway.ibm7545}}\n"
+      "robot_config: {}/config/robots/ibm7545.yaml\n"
+      "cycle_hz: 1000\n"
+      "state_rate_hz: 100\n"
+      "driver: {{kind: ideal, initial_joints: [45, 105, 0, 0], gripper_time_s: 0.05}}\n",
+      cell::testing::source_dir());
+  auto config = load_config(*config::load_string(yaml, "gateway.yaml"));
+  EXPECT_TRUE(config) << config.error().message;
+  return *config;
+}
+
+TEST(GatewayConfig, DriverKeysAreCheckedByTheDriverWithLocations) {
+  auto doc = config::load_string(
+      "robot_config: x.yaml\ndriver: {kind: ideal, gripper_time_s: -1, colour: red}\n", "g.yaml");
+  ASSERT_TRUE(doc);
+  auto config = load_config(*doc);
+  ASSERT_FALSE(config);
+  EXPECT_THAT(config.error().message, ::testing::HasSubstr("key 'driver.gripper_time_s': must be in [0, 10], got -1"));
+  EXPECT_THAT(config.error().message, ::testing::HasSubstr("unknown key 'driver.colour'"));
+  doc = config::load_string("robot_config: x.yaml\ndriver: {kind: puma}\n", "g.yaml");
+  config = load_config(*doc);
+  ASSERT_FALSE(config);
+  EXPECT_THAT(config.error().message, ::testing::HasSubstr("g.yaml:2:16: key 'driver.kind': unknown driver 'puma' (known: ideal"));
 }
 
 class GatewayTest : public ::testing::Test {
@@ -140,7 +157,7 @@ TEST_F(GatewayTest, AnswersEveryCommandAndIgnoresOtherRobots) {
         return s && (*s)->gripper == cell_robot_GRIPPER_CLOSED && (*s)->homed;
       },
       5s));
-  auto gains = command(cell_robot_CMD_SET_GAINS);
+  auto gains = command(cell_robot_CMD_SET_MODE);
   ASSERT_THAT(gains, ::cell::testing::IsOk());
   EXPECT_FALSE((*gains)->status.accepted);
   EXPECT_THAT(bus::str((*gains)->status.reason), ::testing::HasSubstr("not supported"));

@@ -49,8 +49,9 @@ inline constexpr TopicDef<cell_health_PingRequest> kPingRequest{"cell/health/pin
 inline constexpr TopicDef<cell_health_PingReply> kPingReply{"cell/health/pong",
                                                             QosProfile::kRecent, 32};
 // robot.idl
+// Depth 64: a reader descheduled for up to 64 ms still loses nothing of a 1 kHz stream.
 inline constexpr TopicDef<cell_robot_RobotState> kRobotState{"cell/robot/state",
-                                                             QosProfile::kStream, 16};
+                                                             QosProfile::kStream, 64};
 inline constexpr TopicDef<cell_robot_RobotState> kRobotStateLatest{"cell/robot/state_latest",
                                                                    QosProfile::kState};
 inline constexpr TopicDef<cell_robot_RobotCommand> kRobotCommand{"cell/robot/command",

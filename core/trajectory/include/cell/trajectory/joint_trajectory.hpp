@@ -85,8 +85,9 @@ struct JointLimits {
   Status validate() const;
 };
 
-/// Checks every knot and the continuous path between knots against position and velocity
-/// limits (positions and velocities of the Hermite cubics are checked at their extrema).
+/// Checks every knot and the continuous path between knots against position, velocity and
+/// acceleration limits (each Hermite cubic at its extrema; `velocity_tolerance` is the relative
+/// slack granted on speeds and accelerations).
 /// Errors (kOutOfRange) name the segment, the time, the joint and the value against the limit
 /// in user units, e.g. "segment 2 at t=1.234 s: joint J2 at 136.2 deg beyond its limit
 /// [0, 135] deg".
