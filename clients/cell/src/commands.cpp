@@ -270,16 +270,6 @@ void print_table(std::ostream& out, const std::vector<std::vector<std::string>>&
   }
 }
 
-std::string format_uptime(double s) {
-  if (s < 120.0) {
-    return fmt::format("{:.1f} s", s);
-  }
-  if (s < 7200.0) {
-    return fmt::format("{:.1f} min", s / 60.0);
-  }
-  return fmt::format("{:.1f} h", s / 3600.0);
-}
-
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -461,7 +451,7 @@ int run_status(const StatusOptions& options) {
                                                         : spec.host;
     const pid_t pid = entry != nullptr ? entry->pid : (local != nullptr ? local->pid : 0);
     table.push_back({spec.name, host, pid > 0 ? std::to_string(pid) : "-", state,
-                     entry != nullptr ? format_uptime(entry->uptime_s) : "-",
+                     entry != nullptr ? format_duration(entry->uptime_s) : "-",
                      local != nullptr ? std::to_string(local->restarts) : "-", detail});
     json row{{"name", spec.name}, {"host", host},     {"pid", pid},
              {"state", state},    {"detail", detail}, {"in_profile", true}};
@@ -478,7 +468,7 @@ int run_status(const StatusOptions& options) {
     const std::string detail =
         entry.detail.empty() ? "not in the profile" : entry.detail + "; not in the profile";
     table.push_back({entry.service_id, entry.host, std::to_string(entry.pid),
-                     std::string(entry.status()), format_uptime(entry.uptime_s), "-", detail});
+                     std::string(entry.status()), format_duration(entry.uptime_s), "-", detail});
     rows.push_back(json{{"name", entry.service_id},
                         {"host", entry.host},
                         {"pid", entry.pid},

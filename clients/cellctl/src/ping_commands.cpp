@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cell/service/directory.hpp"
+#include "cell/common/time.hpp"
 #include "commands.hpp"
 #include "table.hpp"
 
@@ -16,16 +17,6 @@ namespace cell::cellctl {
 namespace {
 
 using nlohmann::json;
-
-std::string format_uptime(double s) {
-  if (s < 120.0) {
-    return fmt::format("{:.1f} s", s);
-  }
-  if (s < 7200.0) {
-    return fmt::format("{:.1f} min", s / 60.0);
-  }
-  return fmt::format("{:.1f} h", s / 3600.0);
-}
 
 int ping(Session& session, bool with_rtt) {
   service::ServiceDirectory directory(session.participant(), "cellctl");
@@ -117,7 +108,7 @@ int ping(Session& session, bool with_rtt) {
                                    s.host,
                                    std::to_string(s.pid),
                                    std::string(s.status()),
-                                   format_uptime(s.uptime_s)};
+                                   format_duration(s.uptime_s)};
       if (with_rtt) {
         const auto it = rtt_ms.find(s.service_id);
         row.push_back(it != rtt_ms.end() ? fmt::format("{:.2f} ms", it->second) : "-");

@@ -12,6 +12,7 @@
 
 #include "cell/service/health.hpp"
 #include "cell/testing/env.hpp"
+#include "cli_run.hpp"
 #include "session.hpp"
 #include "table.hpp"
 
@@ -22,27 +23,8 @@ using ::testing::HasSubstr;
 using ::testing::Not;
 using namespace std::chrono_literals;
 
-/// One in-process cellctl run.
-struct CliRun {
-  int code = -1;
-  std::string out;
-  std::string err;
-};
-
-CliRun cellctl(std::vector<std::string> args) {
-  args.insert(args.begin(), "cellctl");
-  std::vector<const char*> argv;
-  for (const auto& a : args) {
-    argv.push_back(a.c_str());
-  }
-  std::ostringstream out;
-  std::ostringstream err;
-  CliRun run;
-  run.code = cell::cellctl::run(static_cast<int>(argv.size()), argv.data(), out, err);
-  run.out = out.str();
-  run.err = err.str();
-  return run;
-}
+using testing::CliRun;
+using testing::cellctl;
 
 /// A bus of our own with one or two services on it (HealthReporters in this process).
 class CellctlTest : public ::testing::Test {

@@ -11,6 +11,7 @@
 #include "cell/testing/service_harness.hpp"
 #include "gateway_service.hpp"
 #include "motion_service.hpp"
+#include "cli_run.hpp"
 #include "session.hpp"
 
 namespace cell::cellctl {
@@ -19,26 +20,8 @@ namespace {
 using ::testing::HasSubstr;
 using nlohmann::json;
 
-struct CliRun {
-  int code = -1;
-  std::string out;
-  std::string err;
-};
-
-CliRun cellctl(std::vector<std::string> args) {
-  args.insert(args.begin(), "cellctl");
-  std::vector<const char*> argv;
-  for (const auto& a : args) {
-    argv.push_back(a.c_str());
-  }
-  std::ostringstream out;
-  std::ostringstream err;
-  CliRun run;
-  run.code = cell::cellctl::run(static_cast<int>(argv.size()), argv.data(), out, err);
-  run.out = out.str();
-  run.err = err.str();
-  return run;
-}
+using testing::CliRun;
+using testing::cellctl;
 
 double value_of(const json& joints, const std::string& name) {
   for (const auto& j : joints) {

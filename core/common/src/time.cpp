@@ -27,4 +27,14 @@ std::string format_iso8601(std::int64_t wall_ns) {
                      utc.tm_mon + 1, utc.tm_mday, utc.tm_hour, utc.tm_min, utc.tm_sec, millis);
 }
 
+std::string format_duration(double seconds) {
+  if (seconds < 120.0) {
+    return fmt::format("{:.1f} s", seconds);
+  }
+  if (seconds < 7200.0) {
+    return fmt::format("{:.1f} min", seconds / 60.0);
+  }
+  return fmt::format("{:.1f} h", seconds / 3600.0);
+}
+
 }  // namespace cell

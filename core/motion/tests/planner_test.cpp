@@ -12,6 +12,7 @@
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
 #include "cell/trajectory/executor.hpp"
+#include "cell/testing/vectors.hpp"
 
 namespace cell::motion {
 namespace {
@@ -27,13 +28,8 @@ kinematics::RobotModel robot(const std::string& name) {
 
 double deg(double d) { return d * std::numbers::pi / 180; }
 
-trajectory::JointVector jv(std::initializer_list<double> v) {
-  trajectory::JointVector out(static_cast<Eigen::Index>(v.size()));
-  Eigen::Index i = 0;
-  for (double x : v) {
-    out[i++] = x;
-  }
-  return out;
+inline trajectory::JointVector jv(std::initializer_list<double> values) {
+  return cell::testing::vec<trajectory::JointVector>(values);
 }
 
 // The 7545's image-grab pose (digest 000 §1.3): J1 45 deg, J2 105 deg, Z 0, R 0.

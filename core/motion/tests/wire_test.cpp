@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/vectors.hpp"
 
 namespace cell::motion {
 namespace {
@@ -14,13 +15,8 @@ namespace {
 using ::cell::testing::IsErrWith;
 using ::cell::testing::IsOk;
 
-trajectory::JointVector jv(std::initializer_list<double> v) {
-  trajectory::JointVector out(static_cast<Eigen::Index>(v.size()));
-  Eigen::Index i = 0;
-  for (double x : v) {
-    out[i++] = x;
-  }
-  return out;
+inline trajectory::JointVector jv(std::initializer_list<double> values) {
+  return cell::testing::vec<trajectory::JointVector>(values);
 }
 
 Plan sample_plan() {

@@ -7,6 +7,7 @@
 
 #include "cell/trajectory/joint_trajectory.hpp"
 #include "cell/trajectory/planners.hpp"
+#include "cell/testing/vectors.hpp"
 
 namespace cell::trajectory::testing {
 
@@ -56,12 +57,7 @@ struct Gantry {
 };
 
 inline JointVector jv(std::initializer_list<double> values) {
-  JointVector v(static_cast<Eigen::Index>(values.size()));
-  Eigen::Index i = 0;
-  for (double x : values) {
-    v[i++] = x;
-  }
-  return v;
+  return cell::testing::vec<JointVector>(values);
 }
 
 }  // namespace cell::trajectory::testing

@@ -10,6 +10,7 @@
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
 #include "ideal_driver.hpp"
+#include "cell/testing/vectors.hpp"
 
 namespace cell::gateway {
 namespace {
@@ -20,13 +21,8 @@ using namespace std::chrono_literals;
 
 double deg(double d) { return d * std::numbers::pi / 180; }
 
-JointVector jv(std::initializer_list<double> v) {
-  JointVector out(static_cast<Eigen::Index>(v.size()));
-  Eigen::Index i = 0;
-  for (double x : v) {
-    out[i++] = x;
-  }
-  return out;
+inline JointVector jv(std::initializer_list<double> values) {
+  return cell::testing::vec<JointVector>(values);
 }
 
 /// A scripted controller: follows setpoints like the ideal robot, but a test can raise fault

@@ -19,4 +19,7 @@ std::int64_t monotonic_ns() noexcept;
 /// ISO 8601 UTC with milliseconds, e.g. "2026-11-22T02:08:08.123Z".
 std::string format_iso8601(std::int64_t wall_ns);
 
+/// A duration for people, unit included: "12.3 s", "4.5 min", "2.0 h".
+std::string format_duration(double seconds);
+
 }  // namespace cell

@@ -1,0 +1,34 @@
+#pragma once
+
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "session.hpp"
+
+namespace cell::cellctl::testing {
+
+/// One in-process cellctl run: exit code and what it printed.
+struct CliRun {
+  int code = -1;
+  std::string out;
+  std::string err;
+};
+
+/// Runs cellctl with `args` (without the program name) in this process.
+inline CliRun cellctl(std::vector<std::string> args) {
+  args.insert(args.begin(), "cellctl");
+  std::vector<const char*> argv;
+  for (const auto& a : args) {
+    argv.push_back(a.c_str());
+  }
+  std::ostringstream out;
+  std::ostringstream err;
+  CliRun run;
+  run.code = cell::cellctl::run(static_cast<int>(argv.size()), argv.data(), out, err);
+  run.out = out.str();
+  run.err = err.str();
+  return run;
+}
+
+}  // namespace cell::cellctl::testing
