@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <cstdlib>
+#include <filesystem>
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
@@ -28,8 +29,13 @@ std::string source_dir() {
 }
 
 std::string bin_path(const std::string& name) {
-  const char* env = std::getenv("CELL_BIN_DIR");
-  return fmt::format("{}/{}", env != nullptr ? env : ".", name);
+  if (const char* env = std::getenv("CELL_BIN_DIR"); env != nullptr && *env != '\0') {
+    return fmt::format("{}/{}", env, name);
+  }
+  // Run by hand rather than by ctest: the test executables live beside the tools.
+  std::error_code ec;
+  const auto self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  return ec ? name : (self.parent_path() / name).string();
 }
 
 std::vector<std::string> bus_env(std::uint32_t domain_id, const std::string& partition) {

@@ -21,7 +21,8 @@ std::string unique_partition();
 /// Absolute path of the source checkout ($CELL_SOURCE_DIR, set by ctest).
 std::string source_dir();
 
-/// Absolute path of a built executable ($CELL_BIN_DIR/<name>).
+/// Absolute path of a built executable: $CELL_BIN_DIR/<name>, or beside the running test
+/// executable when the variable is unset (a test run by hand).
 std::string bin_path(const std::string& name);
 
 /// Environment entries that put a child process on this test's private bus:
