@@ -10,6 +10,7 @@
 #include "robot.h"
 #include "task.h"
 #include "vision.h"
+#include "world.h"
 
 namespace cell::bus {
 
@@ -40,6 +41,13 @@ CELL_BUS_REGISTER(cell_vision_Image);
 CELL_BUS_REGISTER(cell_vision_Detections);
 CELL_BUS_REGISTER(cell_vision_EdgeRequest);
 CELL_BUS_REGISTER(cell_vision_EdgeResult);
+CELL_BUS_REGISTER(cell_vision_ImageRequest);
+CELL_BUS_REGISTER(cell_vision_ImageTruth);
+CELL_BUS_REGISTER(cell_world_BeltState);
+CELL_BUS_REGISTER(cell_world_PhotocellEvent);
+CELL_BUS_REGISTER(cell_world_WorldState);
+CELL_BUS_REGISTER(cell_world_WorldRequest);
+CELL_BUS_REGISTER(cell_world_WorldReply);
 CELL_BUS_REGISTER(cell_calibration_CameraCalibration);
 CELL_BUS_REGISTER(cell_calibration_BeltCalibration);
 CELL_BUS_REGISTER(cell_task_JobRequest);

@@ -75,6 +75,10 @@ inline constexpr TopicDef<cell_vision_EdgeRequest> kEdgeRequest{"cell/vision/edg
                                                                 QosProfile::kCommand};
 inline constexpr TopicDef<cell_vision_EdgeResult> kEdgeResult{"cell/vision/edge_result",
                                                               QosProfile::kRecent, 32};
+inline constexpr TopicDef<cell_vision_ImageRequest> kImageRequest{"cell/vision/image_request",
+                                                                  QosProfile::kCommand};
+inline constexpr TopicDef<cell_vision_ImageTruth> kImageTruth{"cell/vision/image_truth",
+                                                              QosProfile::kRecent, 8};
 // calibration.idl
 inline constexpr TopicDef<cell_calibration_CameraCalibration> kCameraCalibration{
     "cell/calibration/camera", QosProfile::kState};
@@ -87,6 +91,18 @@ inline constexpr TopicDef<cell_task_JobCommand> kJobCommand{"cell/task/job_comma
                                                             QosProfile::kCommand};
 inline constexpr TopicDef<cell_task_JobStatus> kJobStatus{"cell/task/job_status",
                                                           QosProfile::kState};
+
+// world.idl
+inline constexpr TopicDef<cell_world_BeltState> kBeltState{"cell/world/belt", QosProfile::kStream,
+                                                           64};
+inline constexpr TopicDef<cell_world_PhotocellEvent> kPhotocell{"cell/world/photocell",
+                                                                QosProfile::kCommand};
+inline constexpr TopicDef<cell_world_WorldState> kWorldState{"cell/world/state",
+                                                             QosProfile::kStream, 1};
+inline constexpr TopicDef<cell_world_WorldRequest> kWorldRequest{"cell/world/request",
+                                                                 QosProfile::kCommand};
+inline constexpr TopicDef<cell_world_WorldReply> kWorldReply{"cell/world/reply",
+                                                             QosProfile::kRecent, 32};
 
 }  // namespace topics
 }  // namespace cell::bus
