@@ -193,10 +193,16 @@ Status check_limits(const JointTrajectory& trajectory, const JointLimits& limits
   }
   const auto& knots = trajectory.knots();
   const double kPosTol = 1e-9;
+  // A path may start outside a position limit (an arm that sagged past it while its torques
+  // were off after a fault, or was pushed there unpowered) and lead back in, but it never goes
+  // farther out than it started: the bounds widen to include the start, joint by joint.
+  const JointVector& q_start = knots.front().q;
+  const JointVector lower = limits.lower.cwiseMin(q_start);
+  const JointVector upper = limits.upper.cwiseMax(q_start);
   auto check_point = [&](std::size_t segment, double t, Eigen::Index j, double q,
                          double qd) -> Status {
     const auto js = static_cast<std::size_t>(j);
-    if (q < limits.lower[j] - kPosTol || q > limits.upper[j] + kPosTol) {
+    if (q < lower[j] - kPosTol || q > upper[j] + kPosTol) {
       return Error{Errc::kOutOfRange,
                    fmt::format("segment {} at t={:.3f} s: joint {} at {} beyond its limit [{}, {}]",
                                segment, t, limits.names[js], format_joint(q, limits.prismatic[js]),

@@ -152,7 +152,7 @@ Result<JointTrajectory> plan_joint_move(const JointVector& q0, const JointVector
     return Error{Errc::kInvalidArgument,
                  fmt::format("speed_scale must be in (0, 1], got {}", speed_scale)};
   }
-  CELL_TRY(check_position(q0, limits, "start"));
+  // The start may lie outside a limit (check_limits: the path leads back in); the target not.
   CELL_TRY(check_position(q1, limits, "target"));
   const JointVector delta = q1 - q0;
   double v_s = std::numeric_limits<double>::infinity();

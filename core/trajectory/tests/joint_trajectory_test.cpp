@@ -59,6 +59,26 @@ TEST(CheckLimits, FindsAnOvershootBetweenKnots) {
   EXPECT_THAT(s, IsErrWith(Errc::kOutOfRange, "beyond its limit [-1000.00 mm, 1000.00 mm]"));
 }
 
+// An arm that sagged 0.5 mm past its lower limit (torques off after a fault) may be led back
+// in, but a path from there never goes farther out than it started.
+TEST(CheckLimits, AStartOutsideALimitMayLeadBackInButNeverFartherOut) {
+  testing::Gantry g;
+  auto back_in = JointTrajectory::from_knots({{0.0, jv({-1000.5, 0, 0}), jv({0, 0, 0})},
+                                              {1.0, jv({-900, 0, 0}), jv({0, 0, 0})}});
+  ASSERT_THAT(back_in, IsOk());
+  EXPECT_THAT(check_limits(*back_in, g.limits), IsOk());
+  auto farther = JointTrajectory::from_knots({{0.0, jv({-1000.5, 0, 0}), jv({0, 0, 0})},
+                                              {1.0, jv({-1001, 0, 0}), jv({0, 0, 0})}});
+  ASSERT_THAT(farther, IsOk());
+  EXPECT_THAT(check_limits(*farther, g.limits),
+              IsErrWith(Errc::kOutOfRange, "joint X at -1001.00 mm beyond its limit"));
+  // Other joints keep their limits: the widening is per joint.
+  auto other = JointTrajectory::from_knots({{0.0, jv({-1000.5, 0, 0}), jv({0, 0, 0})},
+                                            {1.0, jv({-900, 1001, 0}), jv({0, 0, 0})}});
+  ASSERT_THAT(other, IsOk());
+  EXPECT_THAT(check_limits(*other, g.limits), IsErrWith(Errc::kOutOfRange, "joint Y"));
+}
+
 TEST(CheckLimits, FindsExcessSpeedAndNamesTheJointInDegrees) {
   JointLimits limits;
   limits.names = {"J1"};

@@ -88,6 +88,8 @@ struct JointLimits {
 /// Checks every knot and the continuous path between knots against position, velocity and
 /// acceleration limits (each Hermite cubic at its extrema; `velocity_tolerance` is the relative
 /// slack granted on speeds and accelerations).
+/// A path may start outside a position limit and lead back in (an arm that sagged past it with
+/// its torques off): per joint, the bounds widen to include the start, never more.
 /// Errors (kOutOfRange) name the segment, the time, the joint and the value against the limit
 /// in user units, e.g. "segment 2 at t=1.234 s: joint J2 at 136.2 deg beyond its limit
 /// [0, 135] deg".
