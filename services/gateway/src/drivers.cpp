@@ -2,6 +2,8 @@
 
 #include <array>
 
+#include "dpr7545_driver.hpp"
+#include "excalibur_driver.hpp"
 #include "ideal_driver.hpp"
 
 namespace cell::gateway {
@@ -9,6 +11,8 @@ namespace {
 
 constexpr std::array kDrivers = {
     DriverKind{"ideal", &parse_ideal_driver},
+    DriverKind{"dpr7545", &parse_dpr7545_driver},
+    DriverKind{"excalibur", &parse_excalibur_driver},
 };
 
 }  // namespace

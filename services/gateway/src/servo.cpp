@@ -258,6 +258,11 @@ void Servo::apply_commands(
       case cell_robot_CMD_RESET:
         status = driver_->command(DriverCommand::kReset, args);
         if (status) {
+          // After a fault or stop the arm may rest elsewhere than the last setpoint (a move
+          // not achieved, a drift): hold where it is, so the next plan (made from the measured
+          // joints) starts here.
+          setpoint_.q = measured_.q;
+          setpoint_.qd.setZero();
           mode_ = cell_robot_MODE_IDLE;
           event(cell_health_SEVERITY_INFO, "robot.reset",
                 fmt::format("robot '{}' reset", model_.id()));
@@ -288,6 +293,10 @@ void Servo::apply_commands(
         break;
       case cell_robot_CMD_SET_MODE:
         status = driver_->command(DriverCommand::kSetMode, args);
+        if (status) {  // back from manual or teach: the arm is wherever the operator left it
+          setpoint_.q = measured_.q;
+          setpoint_.qd.setZero();
+        }
         break;
       case cell_robot_CMD_SET_TOLERANCE:
         status = driver_->command(DriverCommand::kSetTolerance, args);

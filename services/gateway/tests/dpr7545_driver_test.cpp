@@ -1,0 +1,652 @@
+// The dpr7545 driver (the master) against an in-process fake slave: a thread playing the 80C196
+// side of the handshake (digest 000 §2.3) on a heap DPR window, with a trivial plant and knobs
+// to misbehave. The test thread plays the gateway's servo thread (read, write, next period).
+#include "dpr7545_driver.hpp"
+
+#include <atomic>
+#include <chrono>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include <fmt/format.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "cell/dpr7545/codec.hpp"
+#include "cell/kinematics/robot_config.hpp"
+#include "cell/testing/env.hpp"
+#include "cell/testing/matchers.hpp"
+#include "gateway_config.hpp"
+
+namespace cell::gateway {
+namespace {
+
+namespace d = dpr7545;
+using namespace std::chrono_literals;
+using ::cell::testing::IsErrWith;
+using ::cell::testing::IsOk;
+using ::testing::HasSubstr;
+
+// A 20 ms sample period keeps the fake slave's deadlines far from a loaded machine's hiccups
+// (these threads are not real-time); the driver's logic does not depend on the period. The
+// 1 ms loop runs in tests/gateway_7545 and bench/servo.
+constexpr int kPeriodUs = 20000;
+constexpr double kTs = kPeriodUs * 1e-6;
+constexpr auto kPeriod = std::chrono::microseconds(kPeriodUs);
+
+std::int64_t mono_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+/// A transport viewing another transport's window (both sides in one process).
+class ViewTransport final : public d::Transport {
+ public:
+  explicit ViewTransport(std::span<std::byte> window) : window_(window) {}
+  std::span<std::byte> window() noexcept override { return window_; }
+  const std::string& describe() const noexcept override { return name_; }
+
+ private:
+  std::span<std::byte> window_;
+  std::string name_ = "heap-view";
+};
+
+/// The slave's side, reduced to the protocol: main_loop / idle loop / control_mode with the
+/// deadlines and checks, homing (instantaneous: the joints land at `home_landing`), gripper
+/// (a 20 ms dwell). Plant: each accepted torque moves the joint by gain * (word - 0x800) counts
+/// per period (gain 0: the joints stay where they are).
+class FakeSlave {
+ public:
+  explicit FakeSlave(std::span<std::byte> window) : dpr_(window) {
+    for (auto& p : position_) {
+      p = 0;
+    }
+    thread_ = std::thread([this] { run(); });
+  }
+  ~FakeSlave() {
+    stop_ = true;
+    thread_.join();
+  }
+
+  std::atomic<double> gain{0.0};
+  std::atomic<bool> stall{false};          ///< stop starting periods (the slave hangs)
+  std::atomic<bool> miss_deadline{false};  ///< next period: flag 0x1000
+  std::atomic<std::uint16_t> overrun_bits{0};  ///< rewritten into the low byte every pass
+  std::array<std::atomic<double>, d::kJoints> position_{};
+  std::array<double, d::kJoints> home_landing = {-20.0, 10.0, -30.0, 5.0};
+
+  struct Period {
+    std::array<std::int32_t, d::kJoints> reported{};
+    std::array<std::uint16_t, d::kJoints> torque{};
+  };
+  std::vector<Period> periods() {
+    std::lock_guard lock(mutex_);
+    return periods_;
+  }
+  int gripper_actions() const { return gripper_actions_; }
+  bool gripper_closed() const { return gripper_closed_; }
+  int control_entries() const { return control_entries_; }
+  bool saw_invalid_torque_output() const { return invalid_output_; }
+
+ private:
+  bool stopping() const { return stop_.load(); }
+  void state() {
+    for (int j = 0; j < d::kJoints; ++j) {
+      dpr_.set_position(j, static_cast<std::int32_t>(std::lround(position_[j].load())));
+    }
+    dpr_.set_timing_a(0x3);
+    for (int j = 0; j < d::kJoints; ++j) {
+      dpr_.set_velocity(j, 0);
+    }
+    dpr_.set_timing_a(0x7);
+    dpr_.set_timing_a(0xF);
+    const std::uint16_t o = overrun_bits.load();
+    dpr_.set_error(static_cast<std::uint16_t>((dpr_.error() & 0xFF00) | o));
+  }
+  static void nap(long ns) {
+    const timespec ts{0, ns};
+    nanosleep(&ts, nullptr);
+  }
+  void run() {
+    while (!stopping()) {
+      dpr_.set_command(0);  // main_loop
+      dpr_.set_gripper(0);
+      idle();
+    }
+  }
+  void idle() {
+    while (!stopping()) {
+      if (stall) {
+        nap(50'000);
+        continue;
+      }
+      state();
+      if (dpr_.error() != 0) {
+        nap(50'000);
+        continue;
+      }
+      const std::uint16_t command = dpr_.command();
+      if ((command & d::kCommandControl) != 0) {
+        control();
+        return;
+      }
+      if ((command & d::kCommandFindHome) != 0) {
+        std::this_thread::sleep_for(30ms);
+        for (int j = 0; j < d::kJoints; ++j) {
+          position_[j] = home_landing[static_cast<std::size_t>(j)];
+        }
+        return;
+      }
+      const std::uint16_t gripper = dpr_.gripper();
+      if (gripper != 0) {
+        std::this_thread::sleep_for(10ms);
+        gripper_closed_ = (gripper & d::kGripperClose) != 0;
+        ++gripper_actions_;
+        std::this_thread::sleep_for(10ms);
+        return;
+      }
+      nap(50'000);
+    }
+  }
+  void control() {
+    ++control_entries_;
+    std::int64_t grid = mono_ns();
+    dpr_.set_timing_a(0);
+    dpr_.set_timing_b(0);
+    for (;;) {
+      while (stall && !stopping()) {
+        nap(50'000);
+      }
+      if (stopping()) {
+        return;
+      }
+      const std::int64_t start = mono_ns();
+      const std::int64_t period = std::int64_t{dpr_.sample_period_us()} * 1000;
+      const std::int64_t deadline = start + period;
+      dpr_.set_timing_a(0x1);
+      Period record;
+      for (int j = 0; j < d::kJoints; ++j) {
+        record.reported[static_cast<std::size_t>(j)] =
+            static_cast<std::int32_t>(std::lround(position_[j].load()));
+      }
+      state();
+      if (dpr_.error() != 0) {
+        return;
+      }
+      if (miss_deadline.exchange(false)) {
+        std::this_thread::sleep_for(std::chrono::nanoseconds(period + period / 2));
+      }
+      for (;;) {
+        if (mono_ns() > deadline) {
+          dpr_.set_error(dpr_.error() | d::kErrTorquesLate);
+          return;
+        }
+        if (dpr_.command() == 0) {
+          return;
+        }
+        if ((dpr_.timing_b() & 1) != 0) {
+          break;
+        }
+        nap(20'000);
+      }
+      std::array<std::uint16_t, d::kJoints> words{};
+      for (int j = 0; j < d::kJoints; ++j) {
+        words[static_cast<std::size_t>(j)] = dpr_.torque(j);
+      }
+      if (const std::uint16_t bits = d::check_torques(words); bits != 0) {
+        dpr_.set_error(dpr_.error() | bits);
+        return;
+      }
+      record.torque = words;
+      for (int j = 0; j < d::kJoints; ++j) {
+        if (!d::torque_word_valid(words[static_cast<std::size_t>(j)])) {
+          invalid_output_ = true;
+        }
+        position_[j] =
+            position_[j].load() + gain * d::torque_dac(words[static_cast<std::size_t>(j)]);
+      }
+      {
+        std::lock_guard lock(mutex_);
+        periods_.push_back(record);  // before the acceptance, so the master sees it recorded
+      }
+      dpr_.set_timing_b(0);
+      for (;;) {
+        if (mono_ns() > deadline) {
+          dpr_.set_error(dpr_.error() | d::kErrLoopLate);
+          return;
+        }
+        if (dpr_.timing_a() == 0) {
+          break;
+        }
+        nap(20'000);
+      }
+      grid += period;
+      while (mono_ns() < grid) {
+        nap(50'000);
+      }
+    }
+  }
+
+  d::Dpr dpr_;
+  std::atomic<bool> stop_{false};
+  std::mutex mutex_;
+  std::vector<Period> periods_;
+  std::atomic<int> gripper_actions_{0};
+  std::atomic<bool> gripper_closed_{false};
+  std::atomic<int> control_entries_{0};
+  std::atomic<bool> invalid_output_{false};
+  std::thread thread_;
+};
+
+kinematics::RobotModel ibm7545() {
+  auto model = kinematics::load_robot(cell::testing::source_dir() + "/config/robots/ibm7545.yaml");
+  EXPECT_THAT(model, IsOk());
+  return *model;
+}
+
+Dpr7545Options test_options() {
+  Dpr7545Options o;
+  o.sample_period_us = kPeriodUs;
+  o.handshake_timeout_us = 18000;
+  o.engage_speed_fraction = 0.02;  // per 20 ms sample: the crude plant follows it in range
+  o.activate_timeout_s = 2.0;
+  o.homing_timeout_s = 5.0;
+  o.gripper_timeout_s = 5.0;
+  return o;
+}
+
+class Dpr7545DriverTest : public ::testing::Test {
+ protected:
+  explicit Dpr7545DriverTest(kinematics::RobotModel model = ibm7545(),
+                             Dpr7545Options options = test_options())
+      : model_(std::move(model)),
+        memory_(d::make_heap_transport()),
+        slave_(memory_->window()),
+        driver_(model_, options, kPeriod,
+                [this]() -> Result<std::unique_ptr<d::Transport>> {
+                  return std::unique_ptr<d::Transport>(
+                      std::make_unique<ViewTransport>(memory_->window()));
+                }),
+        dpr_(memory_->window()) {
+    setpoint_.q = JointVector::Zero(4);
+    setpoint_.qd = JointVector::Zero(4);
+  }
+
+  void activate() {
+    ASSERT_THAT(driver_.on_configure(), IsOk());
+    ASSERT_THAT(driver_.on_activate(), IsOk());
+    next_ = Clock::now();
+  }
+
+  /// One servo cycle on the period grid: read, then write the current setpoint.
+  CycleStatus cycle() {
+    std::this_thread::sleep_until(next_);
+    next_ += kPeriod;
+    const auto now = Clock::now();
+    last_read_ = driver_.read(now, state_);
+    if (last_read_ == CycleStatus::kFault) {
+      return last_read_;
+    }
+    const CycleStatus w = driver_.write(now, setpoint_);
+    return last_read_ != CycleStatus::kOk ? last_read_ : w;
+  }
+
+  /// Cycles until `done` (checked after each cycle) or `n` cycles.
+  template <typename Fn>
+  bool cycle_until(Fn&& done, int n = 400) {
+    for (int i = 0; i < n; ++i) {
+      (void)cycle();
+      if (done()) {
+        return true;
+      }
+    }
+    return false;
+  }
+
+  /// Encoder counts per rad (or mm) of joint j.
+  double counts(int j) const { return model_.joints()[static_cast<std::size_t>(j)].counts_per_unit; }
+
+  /// Activates, homes and runs until control mode exchanges torques.
+  void home_and_engage() {
+    activate();
+    ASSERT_THAT(driver_.command(DriverCommand::kHome, {}), IsOk());
+    ASSERT_TRUE(cycle_until([&] { return state_.homed && !state_.busy; }))
+        << "homing did not finish";
+    ASSERT_TRUE(cycle_until([&] { return !slave_.periods().empty(); })) << "no control mode";
+  }
+
+  kinematics::RobotModel model_;
+  std::unique_ptr<d::Transport> memory_;
+  FakeSlave slave_;
+  Dpr7545Driver driver_;
+  d::Dpr dpr_;
+  JointState state_;
+  JointSetpoint setpoint_;
+  CycleStatus last_read_ = CycleStatus::kOk;
+  Clock::time_point next_{};
+};
+
+TEST_F(Dpr7545DriverTest, StaysOutOfControlModeUntilHomedThenHomesAndServos) {
+  activate();
+  for (int i = 0; i < 10; ++i) {
+    EXPECT_EQ(cycle(), CycleStatus::kOk);
+  }
+  EXPECT_EQ(slave_.control_entries(), 0);  // not homed: no control mode, the DACs stay at 0 V
+  EXPECT_FALSE(state_.homed);
+  EXPECT_EQ(dpr_.sample_period_us(), kPeriodUs);  // written by the master
+  ASSERT_THAT(driver_.command(DriverCommand::kHome, {}), IsOk());
+  (void)cycle();
+  EXPECT_TRUE(state_.busy);
+  EXPECT_FALSE(state_.homed);
+  ASSERT_TRUE(cycle_until([&] { return state_.homed; }));
+  EXPECT_FALSE(state_.busy);
+  ASSERT_TRUE(cycle_until([&] { return slave_.periods().size() >= 20; }));
+  EXPECT_EQ(slave_.control_entries(), 1);
+  EXPECT_EQ(dpr_.error(), 0);
+  EXPECT_EQ(driver_.counters().handshake_timeouts, 0U);
+  // The measured joints are the slave's counts through counts_per_unit.
+  EXPECT_NEAR(state_.q[0], -20.0 / model_.joints()[0].counts_per_unit, 1e-12);
+}
+
+// The PD law of the thesis on every exchange, cross-checked from what the slave reported and
+// received; and digest 000 §9.2 case 14 (e = 3 then 5 -> 0x9F4) through the driver.
+TEST_F(Dpr7545DriverTest, TorquesAreTheThesisPdLawOfTheReportedPositions) {
+  slave_.home_landing = {0, 0, 0, 0};
+  home_and_engage();
+  const double cpu = model_.joints()[0].counts_per_unit;
+  const std::size_t first = slave_.periods().size();
+  setpoint_.q[0] = 3.0 / cpu;
+  (void)cycle();
+  setpoint_.q[0] = 5.0 / cpu;
+  (void)cycle();
+  const auto periods = slave_.periods();
+  ASSERT_GE(periods.size(), first + 2);
+  const auto& p3 = periods[first];
+  const auto& p5 = periods[first + 1];
+  EXPECT_EQ(p3.reported[0], 0);
+  EXPECT_EQ(p5.reported[0], 0);
+  EXPECT_EQ(p3.torque[0], d::torque_word(d::pd_torque(60, 0.1, kTs, 3.0 / cpu * cpu, 0.0)));
+  EXPECT_EQ(p5.torque[0],
+            d::torque_word(d::pd_torque(60, 0.1, kTs, 5.0 / cpu * cpu, 3.0 / cpu * cpu)));
+  // At Ts = 20 ms, kv / Ts = 5: 0x800 + 60 * 5 + 5 * 2 = 2358; the digest's 2548 is at 1 ms
+  // (the codec test pins it).
+  EXPECT_NEAR(p5.torque[0], 2358, 1);
+  EXPECT_EQ(p5.torque[1], d::kTorqueZero);  // the other joints sit on their setpoints
+}
+
+TEST_F(Dpr7545DriverTest, PdLawHoldsOnEveryExchangeWhileTheArmMoves) {
+  slave_.home_landing = {0, 0, 0, 0};
+  slave_.gain = 0.012;  // a crude plant: every accepted torque moves the joint a little
+  home_and_engage();
+  const std::size_t first = slave_.periods().size();
+  std::vector<JointVector> setpoints;
+  for (int k = 0; k < 40; ++k) {
+    setpoint_.q[0] = 0.0001 * k;  // rad: 5 counts per sample
+    setpoint_.q[2] = 0.01 * k;    // mm: 3.8 counts per sample
+    setpoints.push_back(setpoint_.q);
+    ASSERT_EQ(cycle(), CycleStatus::kOk) << k;
+  }
+  const auto periods = slave_.periods();
+  ASSERT_GE(periods.size(), first + 40);
+  for (int k = 1; k < 40; ++k) {
+    for (int j : {0, 2}) {
+      const double cpu = model_.joints()[static_cast<std::size_t>(j)].counts_per_unit;
+      const auto& now = periods[first + static_cast<std::size_t>(k)];
+      const auto& before = periods[first + static_cast<std::size_t>(k) - 1];
+      const double e = setpoints[static_cast<std::size_t>(k)][j] * cpu - now.reported[j];
+      const double e_prev = setpoints[static_cast<std::size_t>(k) - 1][j] * cpu - before.reported[j];
+      const double kp = d::kDefaultKp[static_cast<std::size_t>(j)];
+      EXPECT_EQ(now.torque[j], d::torque_word(d::pd_torque(kp, 0.1, kTs, e, e_prev)))
+          << "sample " << k << " joint " << j;
+    }
+  }
+  EXPECT_FALSE(slave_.saw_invalid_torque_output());
+}
+
+// The 7545's Z counts grow going down: a setpoint 1 mm lower than the arm drives positive.
+TEST_F(Dpr7545DriverTest, ZDownIsPositiveCountsWithTheThesisModel) {
+  slave_.home_landing = {0, 0, 0, 0};
+  home_and_engage();
+  setpoint_.q[2] = 0.01;  // 0.01 mm down: 3.8 counts
+  (void)cycle();
+  (void)cycle();
+  EXPECT_GT(slave_.periods().back().torque[2], d::kTorqueZero);
+  EXPECT_NEAR(state_.q[2], 0.0, 1e-9);
+}
+
+kinematics::RobotModel z_up_model() {
+  kinematics::ScaraModel scara = *ibm7545().scara();
+  scara.z_direction = kinematics::ZDirection::kUp;
+  scara.roll_sense = kinematics::RotationSense::kCounterClockwise;
+  auto model = kinematics::RobotModel::create("ibm7545_z_up", scara);
+  EXPECT_THAT(model, IsOk());
+  return *model;
+}
+
+class Dpr7545ZUpTest : public Dpr7545DriverTest {
+ protected:
+  Dpr7545ZUpTest() : Dpr7545DriverTest(z_up_model()) {}
+};
+
+// A model whose Z grows upward (and R counterclockwise) drives the same hardware: the
+// driver maps its conventions onto the 7545's counters (Z down, R clockwise positive).
+TEST_F(Dpr7545ZUpTest, ModelConventionsAreMappedOntoTheCounters) {
+  activate();
+  slave_.position_[2] = -381;  // counts: 1 mm up on the 7545
+  slave_.position_[3] = 227;   // counts: about 1 deg clockwise
+  ASSERT_TRUE(cycle_until([&] { return std::abs(state_.q[2]) > 0.5; }, 20));
+  EXPECT_NEAR(state_.q[2], 381.0 / 380.96, 1e-9);  // +1 mm: up in this model
+  EXPECT_NEAR(state_.q[3], -227.0 / model_.joints()[3].counts_per_unit, 1e-12);
+  EXPECT_LT(state_.q[3], 0.0);  // clockwise is negative in a counterclockwise model
+  slave_.home_landing = {0, 0, 0, 0};
+  ASSERT_THAT(driver_.command(DriverCommand::kHome, {}), IsOk());
+  ASSERT_TRUE(cycle_until([&] { return !slave_.periods().empty(); }));
+  setpoint_.q[2] = 0.02;  // 0.02 mm up = -7.6 counts
+  setpoint_.q[3] = 0.0002;  // counterclockwise = -2.6 counts
+  (void)cycle();
+  (void)cycle();
+  EXPECT_LT(slave_.periods().back().torque[2], d::kTorqueZero);
+  EXPECT_LT(slave_.periods().back().torque[3], d::kTorqueZero);
+}
+
+// After homing the arm coasted past home; the host still holds its old setpoint. Control mode
+// starts at the arm (0 V), then the reference closes the gap at the engage speed: no torque
+// word ever leaves the DAC range.
+TEST_F(Dpr7545DriverTest, ControlModeStartsBumplessAndClosesTheGap) {
+  slave_.home_landing = {-200, 150, -300, 100};
+  slave_.gain = 0.012;
+  home_and_engage();
+  const auto first = slave_.periods().front();
+  for (int j = 0; j < d::kJoints; ++j) {
+    EXPECT_EQ(first.torque[static_cast<std::size_t>(j)], d::kTorqueZero) << j;
+  }
+  ASSERT_TRUE(cycle_until(
+      [&] {
+        return std::abs(state_.q[0] * counts(0)) < 3 && std::abs(state_.q[2] * counts(2)) < 3;
+      },
+      400));
+  EXPECT_FALSE(slave_.saw_invalid_torque_output());
+  EXPECT_EQ(dpr_.error(), 0);
+}
+
+// Digest 000 §9.2 case 6: torques late -> 0x1000: a fault with its meaning, torques zeroed,
+// latched until reset; reset clears the register and restarts control mode.
+TEST_F(Dpr7545DriverTest, TorquesLateFaultIsLatchedAndResetRestartsControl) {
+  home_and_engage();
+  slave_.miss_deadline = true;
+  ASSERT_TRUE(cycle_until([&] { return last_read_ == CycleStatus::kFault; }, 50));
+  EXPECT_EQ(state_.fault_bits & 0xFFFF, d::kErrTorquesLate);
+  EXPECT_THAT(driver_.describe_faults(state_.fault_bits),
+              HasSubstr("master did not provide torques in time (0x1000)"));
+  EXPECT_EQ(driver_.counters().slave_deadline_errors, 1U);
+  for (int j = 0; j < d::kJoints; ++j) {
+    EXPECT_EQ(dpr_.torque(j), d::kTorqueZero);
+  }
+  for (int i = 0; i < 5; ++i) {
+    EXPECT_EQ(cycle(), CycleStatus::kFault);  // latched
+  }
+  EXPECT_THAT(driver_.command(DriverCommand::kGripperClose, {}),
+              IsErrWith(Errc::kNotReady, "reset first"));
+  const auto entries = slave_.control_entries();
+  ASSERT_THAT(driver_.command(DriverCommand::kReset, {}), IsOk());
+  EXPECT_EQ(dpr_.error(), 0);
+  ASSERT_TRUE(cycle_until([&] { return slave_.control_entries() > entries; }, 50));
+  const std::size_t n = slave_.periods().size();
+  ASSERT_TRUE(cycle_until([&] { return slave_.periods().size() >= n + 10; }));
+  EXPECT_EQ(last_read_, CycleStatus::kOk);
+}
+
+// Digest 000 §9.2 case 6/14: a PD value out of range is sent as an invalid word (never clamped),
+// the slave aborts with 0x100 for J1, and the fault reaches read() with its bits.
+TEST_F(Dpr7545DriverTest, OutOfRangeTorqueIsNotClampedAndFaultsWithTheJointsBit) {
+  slave_.home_landing = {0, 0, 0, 0};
+  home_and_engage();
+  setpoint_.q[0] = 40.0 / counts(0);  // e = 40 counts at once: 8448 at 1 ms, 4648 at 20 ms
+  ASSERT_TRUE(cycle_until([&] { return last_read_ == CycleStatus::kFault; }, 10));
+  EXPECT_EQ(state_.fault_bits, d::kErrTorqueJ1);
+  EXPECT_THAT(driver_.describe_faults(state_.fault_bits), HasSubstr("J1"));
+  EXPECT_FALSE(slave_.saw_invalid_torque_output());
+}
+
+TEST_F(Dpr7545DriverTest, OverrunFaultsAndComesBackAfterResetWhileTheJointIsOut) {
+  home_and_engage();
+  slave_.overrun_bits = d::kErrZPositiveOverrun;
+  ASSERT_TRUE(cycle_until([&] { return last_read_ == CycleStatus::kFault; }, 20));
+  EXPECT_EQ(state_.fault_bits, d::kErrZPositiveOverrun);
+  EXPECT_THAT(driver_.describe_faults(state_.fault_bits), HasSubstr("Z positive overrun"));
+  ASSERT_THAT(driver_.command(DriverCommand::kReset, {}), IsOk());
+  ASSERT_TRUE(cycle_until([&] { return last_read_ == CycleStatus::kFault; }, 20));
+  EXPECT_EQ(state_.fault_bits, d::kErrZPositiveOverrun);
+  slave_.overrun_bits = 0;  // moved back by hand
+  ASSERT_THAT(driver_.command(DriverCommand::kReset, {}), IsOk());
+  const std::size_t n = slave_.periods().size();
+  ASSERT_TRUE(cycle_until([&] { return slave_.periods().size() >= n + 5; }));
+}
+
+// The slave reads the gripper register only when idle: the driver leaves control mode, writes
+// it, waits for the slave to clear it (busy meanwhile), then restarts control mode.
+TEST_F(Dpr7545DriverTest, GripperLeavesControlModeAndComesBack) {
+  home_and_engage();
+  ASSERT_THAT(driver_.command(DriverCommand::kGripperClose, {}), IsOk());
+  (void)cycle();
+  EXPECT_TRUE(state_.busy);
+  EXPECT_EQ(state_.gripper, cell_robot_GRIPPER_CLOSING);
+  ASSERT_TRUE(cycle_until([&] { return state_.gripper == cell_robot_GRIPPER_CLOSED; }));
+  EXPECT_TRUE(slave_.gripper_closed());
+  EXPECT_EQ(slave_.gripper_actions(), 1);
+  EXPECT_FALSE(state_.busy);
+  ASSERT_TRUE(cycle_until([&] { return slave_.control_entries() == 2; }));
+  ASSERT_THAT(driver_.command(DriverCommand::kGripperOpen, {}), IsOk());
+  ASSERT_TRUE(cycle_until([&] { return state_.gripper == cell_robot_GRIPPER_OPEN; }));
+  EXPECT_FALSE(slave_.gripper_closed());
+  EXPECT_EQ(dpr_.error(), 0);  // leaving and re-entering never missed a deadline
+  EXPECT_EQ(driver_.counters().handshake_timeouts, 0U);
+}
+
+// Digest 000 §9.2 case 5 (lighting): the latch at 0xC9000 (window offset 0x1000).
+TEST_F(Dpr7545DriverTest, LightsWriteTheLatch) {
+  activate();
+  CommandArgs args;
+  args.halogen_on = true;
+  ASSERT_THAT(driver_.command(DriverCommand::kLights, args), IsOk());
+  EXPECT_EQ(dpr_.read_lighting(), 0b01);
+  args.fluorescent_on = true;
+  ASSERT_THAT(driver_.command(DriverCommand::kLights, args), IsOk());
+  EXPECT_EQ(dpr_.read_lighting(), 0b11);
+  args = {};
+  ASSERT_THAT(driver_.command(DriverCommand::kLights, args), IsOk());
+  EXPECT_EQ(dpr_.read_lighting(), 0);
+}
+
+TEST_F(Dpr7545DriverTest, GainsAreEditableAtRunTime) {
+  slave_.home_landing = {0, 0, 0, 0};
+  home_and_engage();
+  CommandArgs args;
+  args.kp = {120, 60, 55, 60};
+  args.kv = {0, 0.1, 0.1, 0.1};
+  ASSERT_THAT(driver_.command(DriverCommand::kSetGains, args), IsOk());
+  setpoint_.q[0] = 2.0 / counts(0);
+  (void)cycle();
+  (void)cycle();
+  EXPECT_NEAR(slave_.periods().back().torque[0], 0x800 + 240, 1);  // 120 * 2, no D term
+  args.kp = {1, 2};
+  EXPECT_THAT(driver_.command(DriverCommand::kSetGains, args),
+              IsErrWith(Errc::kInvalidArgument, "4 kp and 4 kv"));
+  EXPECT_FALSE(driver_.supports(DriverCommand::kSetMode));
+}
+
+// A slave that stops answering costs a cycle at most its budget and is counted as a timeout
+// (kRetry: the host faults after a few in a row).
+TEST_F(Dpr7545DriverTest, SilentSlaveGivesBoundedRetriesNotABlockedCycle) {
+  home_and_engage();
+  slave_.stall = true;
+  std::this_thread::sleep_for(3 * kPeriod);  // let the running period end
+  int retries = 0;
+  for (int i = 0; i < 4; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const CycleStatus s = cycle();
+    const auto spent = std::chrono::steady_clock::now() - t0;
+    EXPECT_LT(spent, kPeriod + 2 * kPeriod);  // sleep to the grid + at most the budget
+    retries += s == CycleStatus::kRetry ? 1 : 0;
+    if (s == CycleStatus::kFault) {
+      break;  // the slave's own 0x1000 from the period it abandoned
+    }
+  }
+  EXPECT_GE(retries + (last_read_ == CycleStatus::kFault ? 1 : 0), 1);
+  EXPECT_GE(driver_.counters().handshake_timeouts, 1U);
+  slave_.stall = false;
+}
+
+TEST(Dpr7545Config, ParserChecksKeysWithLocations) {
+  const auto load = [](const std::string& driver) {
+    return load_config(*config::load_string(
+        "robot_config: x.yaml\ndriver: {kind: dpr7545" + driver + "}\n", "gw.yaml"));
+  };
+  EXPECT_THAT(load(", transport: shm, shm_name: /cell-x, kp: [60, 60, 55, 60]"), IsOk());
+  EXPECT_THAT(load(", transport: serial"),
+              IsErrWith(Errc::kConfig, "key 'driver.transport': must be shm or physical"));
+  EXPECT_THAT(load(", kp: [60, 60]"), IsErrWith(Errc::kConfig, "expected a list of 4 values"));
+  EXPECT_THAT(load(", shm_name: nope"), IsErrWith(Errc::kConfig, "must start with '/'"));
+  EXPECT_THAT(load(", handshake_timeout_us: 5000"),
+              IsErrWith(Errc::kConfig, "never waits past its period"));
+  EXPECT_THAT(load(", kv: [0.1, -1, 0.1, 0.1]"), IsErrWith(Errc::kConfig, "gains of joint J2"));
+  EXPECT_THAT(load(", gain: 3"), IsErrWith(Errc::kConfig, "unknown key 'driver.gain'"));
+}
+
+TEST(Dpr7545Config, FactoryChecksTheRobotAndTheCycle) {
+  auto config = load_config(*config::load_string(
+      "robot_config: x.yaml\ndriver: {kind: dpr7545, shm_name: /cell-dpr7545-missing-test, "
+      "activate_timeout_s: 0.2}\n",
+      "gw.yaml"));
+  ASSERT_THAT(config, IsOk());
+  const auto model = ibm7545();
+  auto wrong_cycle = config->make_driver(DriverSetup{model, std::chrono::milliseconds(2)});
+  EXPECT_THAT(wrong_cycle, IsErrWith(Errc::kConfig, "does not match the gateway's cycle"));
+  auto excalibur =
+      kinematics::load_robot(cell::testing::source_dir() + "/config/robots/excalibur.yaml");
+  ASSERT_THAT(excalibur, IsOk());
+  EXPECT_THAT(config->make_driver(DriverSetup{*excalibur, std::chrono::milliseconds(1)}),
+              IsErrWith(Errc::kConfig, "drives 4 joints"));
+  auto driver = config->make_driver(DriverSetup{model, std::chrono::milliseconds(1)});
+  ASSERT_THAT(driver, IsOk());
+  // No simulator: configure waits activate_timeout_s for the segment, then says what is missing.
+  EXPECT_THAT((*driver)->on_configure(),
+              IsErrWith(Errc::kNotReady, "'/cell-dpr7545-missing-test' does not exist"));
+}
+
+TEST(Dpr7545Config, PhysicalTransportFailsClearlyWithoutTheDevice) {
+  auto config = load_config(*config::load_string(
+      "robot_config: x.yaml\ndriver: {kind: dpr7545, transport: physical, "
+      "physical_device: /nonexistent/mem, physical_base_address: 0xC8000}\n",
+      "gw.yaml"));
+  ASSERT_THAT(config, IsOk());
+  const auto model = ibm7545();
+  auto driver = config->make_driver(DriverSetup{model, std::chrono::milliseconds(1)});
+  ASSERT_THAT(driver, IsOk());
+  EXPECT_THAT((*driver)->on_configure(), IsErrWith(Errc::kIo, "cannot open /nonexistent/mem"));
+}
+
+}  // namespace
+}  // namespace cell::gateway
