@@ -48,4 +48,13 @@ void add_move_commands(CLI::App& app, Commands& commands);
 /// `cellctl robot home|open|close|stop|reset|lights|state --robot <id>`.
 void add_robot_commands(CLI::App& app, Commands& commands);
 
+/// `cellctl rapt check|compile|run FILE`: the RAPT compiler and run time (core/rapt, no bus).
+void add_rapt_commands(CLI::App& app, Commands& commands);
+
+/// `cellctl world parts|reset|spawn|remove|belt|scatter ...`: the simulated world (sim-world).
+void add_world_commands(CLI::App& app, Commands& commands);
+
+/// `cellctl camera grab --camera <id> -o frame.png [--truth truth.json] [--trigger now|photocell]`.
+void add_camera_commands(CLI::App& app, Commands& commands);
+
 }  // namespace cell::cellctl

@@ -21,8 +21,10 @@ namespace {
 constexpr std::uint32_t kMaxDomainId = 230;
 
 /// Every command group, in --help order.
-constexpr std::array<Registrar, 4> kCommandGroups = {&add_ping_commands, &add_kin_commands,
-                                                     &add_move_commands, &add_robot_commands};
+constexpr std::array<Registrar, 7> kCommandGroups = {&add_ping_commands, &add_kin_commands,
+                                                     &add_move_commands, &add_robot_commands,
+                                                     &add_world_commands, &add_camera_commands,
+                                                     &add_rapt_commands};
 
 }  // namespace
 
