@@ -33,7 +33,7 @@ endfunction()
 # cell_add_test(<name> SOURCES ... DEPENDS ... [LABELS ...] [TIMEOUT s])
 # One executable per library; every TEST becomes a ctest entry "<name>.<Suite>.<Test>".
 function(cell_add_test name)
-  cmake_parse_arguments(ARG "" "TIMEOUT" "SOURCES;DEPENDS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "SERIAL" "TIMEOUT" "SOURCES;DEPENDS;LABELS" ${ARGN})
   add_executable(${name}_test ${ARG_SOURCES})
   target_link_libraries(${name}_test PRIVATE ${ARG_DEPENDS} GTest::gmock_main)
   cell_set_warnings(${name}_test)
@@ -47,6 +47,9 @@ function(cell_add_test name)
   set(props TIMEOUT ${ARG_TIMEOUT} ENVIRONMENT ${env})
   if(ARG_LABELS)
     list(APPEND props LABELS "${ARG_LABELS}")
+  endif()
+  if(ARG_SERIAL)  # timing-sensitive (a 1 kHz hard deadline): nothing else runs beside it
+    list(APPEND props RUN_SERIAL TRUE)
   endif()
   gtest_discover_tests(${name}_test TEST_PREFIX "${name}." DISCOVERY_TIMEOUT 60
                        PROPERTIES ${props})

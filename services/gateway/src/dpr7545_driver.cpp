@@ -27,6 +27,7 @@ constexpr std::int64_t kSpinNs = 10'000;   // spin this long before sleeping
 constexpr long kSleepNs = 20'000;          // then sleep in steps of this
 constexpr int kEngageTimeoutPeriods = 50;  // the slave must enter control mode within this
 constexpr int kLeaveTimeoutPeriods = 200;  // ... and return to its idle loop within this
+constexpr int kRestReads = 20;  // idle reads without motion before control mode may start
 
 void cpu_relax() noexcept {
 #if defined(__x86_64__) || defined(__i386__)
@@ -313,11 +314,14 @@ bool Dpr7545Driver::ready_to_engage(Clock::time_point now) noexcept {
 }
 
 void Dpr7545Driver::read_idle(JointState& state) noexcept {
+  bool moved = false;
   for (int j = 0; j < kJoints; ++j) {
     const std::int32_t p = dpr_->position_consistent(j);
+    moved = moved || std::abs(p - position_[idx(j)]) > 1;
     velocity_counts_s_[idx(j)] = 0.0;
     position_[idx(j)] = p;
   }
+  rest_reads_ = moved ? 0 : std::min(rest_reads_ + 1, kRestReads);
   fill_state(state);
 }
 
@@ -340,6 +344,7 @@ CycleStatus Dpr7545Driver::fault(std::uint32_t bits, JointState& state) noexcept
   if ((bits & d::kErrDeadlineMask) != 0) {
     deadline_errors_.fetch_add(1, std::memory_order_relaxed);
   }
+  fault_words_ = words_;
   stop_control();  // the slave zeroed its DACs already if it flagged the error itself
   if (phase_ == Phase::kHoming || phase_ == Phase::kGripper) {
     dpr_->set_gripper(0);
@@ -503,7 +508,7 @@ CycleStatus Dpr7545Driver::read(Clock::time_point now, JointState& state) {
       if (const std::uint16_t error = dpr_->error(); error != 0) {
         return fault(error, state);
       }
-      if (!homed_ || !may_engage) {
+      if (!homed_ || !may_engage || rest_reads_ < kRestReads) {
         return CycleStatus::kOk;
       }
       // Start control mode. The marker in timing_B tells when the slave has passed its
@@ -802,7 +807,7 @@ std::string Dpr7545Driver::describe_faults(std::uint32_t bits) const {
   for (int j = 0; j < kJoints; ++j) {
     if ((bits & d::torque_error_bit(j)) != 0) {
       text += fmt::format("; {}: position error {:.1f} counts gave PD word 0x{:04x}",
-                          d::kJointNames[idx(j)], error_[idx(j)], words_[idx(j)]);
+                          d::kJointNames[idx(j)], error_[idx(j)], fault_words_[idx(j)]);
     }
   }
   const auto add = [&](std::string_view what) {

@@ -201,6 +201,13 @@ class Dpr7545Driver final : public RobotDriver {
   std::array<double, dpr7545::kJoints> error_{};
   std::array<double, dpr7545::kJoints> offset_{};
   std::array<std::uint16_t, dpr7545::kJoints> words_{};
+  /// The words of the exchange that faulted (words_ is zeroed by stop_control), for
+  /// describe_faults.
+  std::array<std::uint16_t, dpr7545::kJoints> fault_words_{};
+  /// Idle reads in a row in which no joint moved by more than a count: control mode starts
+  /// only on an arm at rest (after a fault the arm coasts with its DACs at 0 V; engaging the
+  /// stiff PD on a moving joint saturates its D term and the slave aborts with 0x100 << j).
+  int rest_reads_ = 0;
 
   std::atomic<std::uint64_t> periods_{0};
   std::atomic<std::uint64_t> timeouts_{0};

@@ -600,10 +600,14 @@ void ExcaliburDriver::set_reported(const JointVector& q, Clock::time_point now) 
 }
 
 bool ExcaliburDriver::send_move(const JointVector& q) {
+  // The instant the command left, not when its reply was read: a "move not achieved" for this
+  // very move can arrive between its OK and our return from the exchange, and must not be
+  // mistaken for a message about an earlier move (handle_unsolicited, moved_since).
+  const Clock::time_point sent_at = Clock::now();
   Exchange e = transact(move_command(q), pe::MessageKind::kOk);
   if (e.outcome == Outcome::kOk) {
     last_sent_ = q;
-    last_move_at_ = Clock::now();
+    last_move_at_ = sent_at;
     active_ = true;
     ++moves_sent_;
     return true;

@@ -64,6 +64,7 @@ GatewayService::GatewayService(service::Context& ctx, const GatewayConfig& confi
     throw std::runtime_error(fmt::format("driver '{}' failed to start: {}", config_.driver_kind,
                                          s.error().message));
   }
+  publisher_thread_ = std::thread([this] { publisher_loop(); });
   servo_thread_ = std::thread([this] { servo_loop(); });
 }
 
@@ -72,7 +73,32 @@ GatewayService::~GatewayService() {
   if (servo_thread_.joinable()) {
     servo_thread_.join();
   }
+  publish_request_.fetch_or(kPublishStop);
+  publish_request_.notify_one();
+  if (publisher_thread_.joinable()) {
+    publisher_thread_.join();
+  }
   servo_->shutdown();
+}
+
+void GatewayService::publisher_loop() {
+  cell_robot_RobotMode last_mode = cell_robot_MODE_UNCONFIGURED;
+  for (;;) {
+    publish_request_.wait(0);
+    const std::uint32_t request = publish_request_.exchange(0);
+    if ((request & kPublishStop) != 0) {
+      return;
+    }
+    const ServoSnapshot snapshot = servo_->snapshot();
+    if ((request & kPublishStream) != 0) {
+      publish_state(snapshot, state_writer_);
+      servo_->reset_jitter();
+    }
+    if ((request & kPublishLatest) != 0 || snapshot.mode != last_mode) {
+      publish_state(snapshot, latest_writer_);
+      last_mode = snapshot.mode;
+    }
+  }
 }
 
 void GatewayService::servo_loop() {
@@ -91,7 +117,6 @@ void GatewayService::servo_loop() {
       static_cast<std::uint64_t>(std::max(1.0, std::round(config_.cycle_hz / 10.0)));
   std::int64_t next = monotonic_ns() + period_ns;
   std::uint64_t n = 0;
-  cell_robot_RobotMode last_mode = cell_robot_MODE_UNCONFIGURED;
   while (!stop_servo_.load(std::memory_order_relaxed)) {
     const timespec wake = to_timespec(next);
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &wake, nullptr) == EINTR) {
@@ -101,16 +126,11 @@ void GatewayService::servo_loop() {
     const std::int64_t done = monotonic_ns();
     servo_->record_timing(static_cast<double>(woke - next) * 1e-3, done > next + period_ns);
     ++n;
-    if (n % publish_every == 0 || n % latest_every == 0) {
-      const ServoSnapshot snapshot = servo_->snapshot();
-      if (n % publish_every == 0) {
-        publish_state(snapshot, state_writer_);
-        servo_->reset_jitter();
-      }
-      if (n % latest_every == 0 || snapshot.mode != last_mode) {
-        publish_state(snapshot, latest_writer_);
-        last_mode = snapshot.mode;
-      }
+    const std::uint32_t request = (n % publish_every == 0 ? kPublishStream : 0U) |
+                                  (n % latest_every == 0 ? kPublishLatest : 0U);
+    if (request != 0) {
+      publish_request_.fetch_or(request);
+      publish_request_.notify_one();  // a futex wake when the publisher waits; no lock
     }
     next += period_ns;
     if (done > next) {  // fell behind by more than a period: skip, do not burst

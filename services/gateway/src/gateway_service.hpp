@@ -60,7 +60,16 @@ class GatewayService {
   bus::Writer<cell_robot_RobotState> state_writer_;
   bus::Writer<cell_robot_RobotState> latest_writer_;
 
+  // The servo thread asks the publisher thread to write a state (kPublishStream,
+  // kPublishLatest bits; kPublishStop ends it): a DDS write takes Cyclone's locks, which its
+  // own threads hold at normal priority, so it never runs on the real-time thread.
+  static constexpr std::uint32_t kPublishStream = 1;
+  static constexpr std::uint32_t kPublishLatest = 2;
+  static constexpr std::uint32_t kPublishStop = 4;
+  void publisher_loop();
+  std::atomic<std::uint32_t> publish_request_{0};
   std::atomic<bool> stop_servo_{false};
+  std::thread publisher_thread_;
   std::thread servo_thread_;
   std::uint64_t state_seq_ = 0;
 };

@@ -11,6 +11,7 @@
 
 #include <Eigen/Geometry>
 
+#include "cell/common/pi_mutex.hpp"
 #include "cell/kinematics/robot_model.hpp"
 #include "cell/motion/wire.hpp"
 #include "cell/trajectory/executor.hpp"
@@ -119,7 +120,9 @@ class Servo {
   std::uint64_t cycle_ = 0;
   int retries_in_a_row_ = 0;
 
-  mutable std::mutex mutex_;  // guards pending_, snapshot_, events_out_
+  // Guards pending_, snapshot_, events_out_. Shared by the servo thread (SCHED_FIFO) and the
+  // bus threads: priority inheritance bounds how long the servo thread can wait for it.
+  mutable PiMutex mutex_;
   Pending pending_;
   ServoSnapshot snapshot_;
   std::vector<ServoEvent> events_out_;
