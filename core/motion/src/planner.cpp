@@ -167,6 +167,13 @@ Result<Plan> Planner::via_path(const trajectory::JointVector& q0,
     }
     o.speed /= worst * 1.01;
   }
+  // The thesis sizes its segments for speed only; the robot's accelerations bound it too. Too
+  // sharp a path (short segments, a start between via points after a reset) is stretched in
+  // time as a whole, which keeps its shape and divides its accelerations by the factor^2.
+  const double accel = trajectory::peak_acceleration_ratio(*traj, limits_);
+  if (accel > 1.0) {
+    traj = traj->time_scaled(std::sqrt(accel * 1.01));
+  }
   CELL_TRY(trajectory::check_limits(*traj, limits_, 0.02));
   Plan plan;
   plan.trajectory = std::move(*traj);

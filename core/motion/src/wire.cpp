@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include "cell/bus/view.hpp"
+#include "cell/geometry/idl_pose.hpp"
 
 namespace cell::motion {
 
@@ -94,31 +95,10 @@ Result<Plan> from_idl(const cell_motion_Trajectory& message, int dof) {
   return plan;
 }
 
-cell_common_Pose to_idl(const Eigen::Isometry3d& pose) {
-  cell_common_Pose out{};
-  const Eigen::Quaterniond q(pose.linear());
-  out.position_mm = {pose.translation().x(), pose.translation().y(), pose.translation().z()};
-  out.orientation = {q.w(), q.x(), q.y(), q.z()};
-  return out;
-}
+cell_common_Pose to_idl(const Eigen::Isometry3d& pose) { return geometry::pose_to_idl(pose); }
 
 Result<Eigen::Isometry3d> from_idl(const cell_common_Pose& pose) {
-  const Eigen::Vector3d p(pose.position_mm.x, pose.position_mm.y, pose.position_mm.z);
-  Eigen::Quaterniond q(pose.orientation.w, pose.orientation.x, pose.orientation.y,
-                       pose.orientation.z);
-  if (!p.allFinite() || !q.coeffs().allFinite()) {
-    return Error{Errc::kInvalidArgument, "pose has a non-finite value"};
-  }
-  const double norm = q.norm();
-  if (norm < 0.9 || norm > 1.1) {
-    return Error{Errc::kInvalidArgument,
-                 fmt::format("pose orientation is not a unit quaternion (norm {:.3f})", norm)};
-  }
-  q.normalize();
-  Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
-  out.linear() = q.toRotationMatrix();
-  out.translation() = p;
-  return out;
+  return geometry::pose_from_idl(pose);
 }
 
 }  // namespace cell::motion

@@ -102,6 +102,31 @@ TEST(Planner, ViaPathKeepsTheThesisRuleWithinTheSpeedLimits) {
   EXPECT_TRUE(plan->trajectory.end().isApprox(grab_pose(), 1e-9));
 }
 
+// A start beside the via point (a path resumed after a reset): the thesis's rule gives a short
+// first segment into a fast via point, sharper than the 7545's acceleration limits (1.9 x);
+// the planner stretches the whole path in time instead of refusing it.
+TEST(Planner, ViaPathTooSharpForTheAccelerationLimitsIsStretchedInTime) {
+  const Planner planner(robot("ibm7545"), PlannerOptions{});
+  const auto& model = planner.model();
+  const auto limits = joint_limits(model);
+  const trajectory::JointVector start = jv({deg(32), deg(40), 120, deg(20)});
+  const trajectory::JointVector via = jv({deg(40), deg(50), 100, deg(30)});
+  const trajectory::JointVector target = jv({deg(90), deg(100), 180, deg(60)});
+  trajectory::ViaPointOptions o;
+  o.speed = limits.max_velocity;
+  o.settle_s = PlannerOptions{}.via_settle_s;
+  auto raw = trajectory::plan_via_points({start, via, target}, o);
+  ASSERT_THAT(raw, IsOk());
+  ASSERT_GT(trajectory::peak_acceleration_ratio(*raw, limits), 1.0);  // the case is sharp
+  auto via_pose = model.forward(via);
+  auto target_pose = model.forward(target);
+  auto plan = planner.via_path(start, {*via_pose}, *target_pose, 1.0);
+  ASSERT_THAT(plan, IsOk());
+  EXPECT_THAT(trajectory::check_limits(plan->trajectory, limits, 0.02), IsOk());
+  EXPECT_LE(trajectory::peak_acceleration_ratio(plan->trajectory, limits), 1.0);
+  EXPECT_TRUE(plan->trajectory.end().isApprox(target, 1e-9));
+}
+
 TEST(Planner, ExcaliburApproachesAlongTheToolAxis) {
   const Planner planner(robot("excalibur"), PlannerOptions{});
   const auto& model = planner.model();

@@ -158,6 +158,30 @@ Result<JointTrajectory> JointTrajectory::then(const JointTrajectory& next) const
   return JointTrajectory(std::move(joined));
 }
 
+JointTrajectory JointTrajectory::time_scaled(double factor) const {
+  std::vector<Knot> knots = knots_;
+  for (Knot& k : knots) {
+    k.t_s *= factor;
+    k.qd /= factor;
+  }
+  return JointTrajectory(std::move(knots));
+}
+
+double peak_acceleration_ratio(const JointTrajectory& trajectory, const JointLimits& limits) {
+  const auto& knots = trajectory.knots();
+  double worst = 0;
+  for (std::size_t i = 0; i + 1 < knots.size(); ++i) {
+    const Knot& a = knots[i];
+    const Knot& b = knots[i + 1];
+    for (Eigen::Index j = 0; j < trajectory.dof(); ++j) {
+      const Hermite c{a.q[j], a.qd[j], b.q[j], b.qd[j], b.t_s - a.t_s};
+      worst = std::max({worst, std::abs(c.acc(0.0)) / limits.max_acceleration[j],
+                        std::abs(c.acc(1.0)) / limits.max_acceleration[j]});
+    }
+  }
+  return worst;
+}
+
 Status JointLimits::validate() const {
   const std::size_t n = lower.size();
   if (n == 0 || upper.size() != static_cast<Eigen::Index>(n) ||

@@ -79,6 +79,22 @@ TEST(CheckLimits, AStartOutsideALimitMayLeadBackInButNeverFartherOut) {
   EXPECT_THAT(check_limits(*other, g.limits), IsErrWith(Errc::kOutOfRange, "joint Y"));
 }
 
+TEST(JointTrajectory, TimeScalingKeepsThePathAndDividesAccelerationsBySquare) {
+  testing::Gantry g(2500, 1000);
+  auto traj = JointTrajectory::from_knots({{0.0, jv({0, 0, 0}), jv({0, 0, 0})},
+                                           {1.0, jv({1000, 0, 0}), jv({0, 0, 0})}});
+  ASSERT_THAT(traj, IsOk());
+  // A rest-to-rest cubic over 1000 mm in 1 s: 6 * 1000 / 1^2 = 6000 mm/s^2 at its ends.
+  EXPECT_NEAR(peak_acceleration_ratio(*traj, g.limits), 6.0, 1e-9);
+  const JointTrajectory slow = traj->time_scaled(2.0);
+  EXPECT_NEAR(slow.duration_s(), 2.0, 1e-12);
+  EXPECT_NEAR(peak_acceleration_ratio(slow, g.limits), 1.5, 1e-9);
+  for (double u = 0; u <= 1.0; u += 0.1) {
+    EXPECT_NEAR(slow.sample(2.0 * u).q[0], traj->sample(u).q[0], 1e-9);
+    EXPECT_NEAR(slow.sample(2.0 * u).qd[0], traj->sample(u).qd[0] / 2.0, 1e-9);
+  }
+}
+
 TEST(CheckLimits, FindsExcessSpeedAndNamesTheJointInDegrees) {
   JointLimits limits;
   limits.names = {"J1"};

@@ -64,6 +64,10 @@ class JointTrajectory {
   /// (kInvalidArgument otherwise, naming the joint).
   Result<JointTrajectory> then(const JointTrajectory& next) const;
 
+  /// The same path, `factor` (> 0) times slower: knot times times factor, velocities divided
+  /// by it, so accelerations are divided by factor^2. Precondition: factor > 0 and finite.
+  JointTrajectory time_scaled(double factor) const;
+
  private:
   explicit JointTrajectory(std::vector<Knot> knots) : knots_(std::move(knots)) {}
   std::size_t segment_at(double t_s) const noexcept;
@@ -95,6 +99,11 @@ struct JointLimits {
 /// [0, 135] deg".
 Status check_limits(const JointTrajectory& trajectory, const JointLimits& limits,
                     double velocity_tolerance = 1e-6);
+
+/// The largest |acceleration| / max_acceleration over every joint and segment (a cubic's
+/// acceleration is linear in time: its extremes are at the segment ends). Precondition:
+/// trajectory and limits have the same number of joints.
+double peak_acceleration_ratio(const JointTrajectory& trajectory, const JointLimits& limits);
 
 /// Formats a joint value in user units: "12.50 deg" or "200.00 mm".
 std::string format_joint(double value, bool prismatic);

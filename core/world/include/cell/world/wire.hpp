@@ -9,6 +9,7 @@
 
 #include "cell/bus/idl_types.hpp"
 #include "cell/common/result.hpp"
+#include "cell/geometry/idl_pose.hpp"
 #include "cell/world/part_class.hpp"
 #include "cell/world/scene.hpp"
 #include "cell/world/world.hpp"
@@ -26,10 +27,9 @@ Result<Shape> from_idl(cell_world_PartShape shape);
 /// IDL gripper state -> ours (unknown values become kUnknown).
 GripperState from_idl(cell_robot_GripperState gripper) noexcept;
 
-/// IDL Pose (mm, unit quaternion w x y z) <-> Isometry3d. from_idl normalises the quaternion.
-/// Errors: kInvalidArgument for non-finite values or a quaternion far from unit length.
-cell_common_Pose pose_to_idl(const Eigen::Isometry3d& pose) noexcept;
-Result<Eigen::Isometry3d> pose_from_idl(const cell_common_Pose& pose);
+/// IDL Pose <-> Isometry3d (cell/geometry/idl_pose.hpp).
+using geometry::pose_from_idl;
+using geometry::pose_to_idl;
 
 /// A whole WorldState (or the parts of a WorldReply) ready to write. Meshes are converted once
 /// per class and cached in the wire, so reuse one wire across publishes.
