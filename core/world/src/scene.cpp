@@ -256,6 +256,41 @@ void read_part(config::MapReader& r,
   parts.push_back(std::move(p));
 }
 
+void read_feeder(config::MapReader& r, const Catalogue& catalogue,
+                 const std::vector<PartClass>& scene_classes, std::vector<FeederSpec>& out) {
+  FeederSpec f;
+  std::array<double, 2> yaw_deg{-180.0, 180.0};
+  std::int64_t seed = 1;
+  r.required("belt", f.belt);
+  r.required("classes", f.classes);
+  r.required("period_s", f.period_s);
+  r.optional("start_mm", f.start_mm);
+  r.optional("lateral_mm", f.lateral_mm);
+  r.optional("yaw_deg", yaw_deg);
+  r.optional("count", f.count);
+  r.optional("seed", seed);
+  if (seed < 0) {
+    r.fail("seed", fmt::format("must be >= 0, got {}", seed));
+  }
+  f.seed = static_cast<std::uint64_t>(seed);
+  f.yaw_min = deg_to_rad(yaw_deg[0]);
+  f.yaw_max = deg_to_rad(yaw_deg[1]);
+  f.where = r.where("");
+  for (const auto& name : f.classes) {
+    bool known = catalogue.find(name) != nullptr;
+    for (const auto& c : scene_classes) {
+      known = known || c.name == name;
+    }
+    if (!known) {
+      r.fail("classes", fmt::format("unknown part class '{}' (known: {})", name, catalogue.list()));
+    }
+  }
+  if (auto st = f.validate(); !st) {
+    r.fail("", st.error().message);
+  }
+  out.push_back(std::move(f));
+}
+
 void read_scatter(config::MapReader& r,
                   const Catalogue& catalogue,
                   const std::vector<PartClass>& scene_classes,
@@ -340,6 +375,29 @@ Status BeltSpec::validate() const {
   return ok_status();
 }
 
+Status FeederSpec::validate() const {
+  auto bad = [](const std::string& what) {
+    return Error{Errc::kInvalidArgument, "feeder: " + what};
+  };
+  if (belt.empty()) {
+    return bad("belt is empty");
+  }
+  if (classes.empty()) {
+    return bad("classes must name at least one part class");
+  }
+  if (!(period_s > 0.0) || !std::isfinite(period_s)) {
+    return bad(fmt::format("period_s must be > 0, got {}", period_s));
+  }
+  if (!(start_mm >= 0.0) || !std::isfinite(start_mm) || !(lateral_mm >= 0.0) ||
+      !std::isfinite(lateral_mm)) {
+    return bad("start_mm and lateral_mm must be >= 0");
+  }
+  if (!(yaw_min <= yaw_max) || !std::isfinite(yaw_min) || !std::isfinite(yaw_max)) {
+    return bad("yaw range must be [min, max] with min <= max");
+  }
+  return ok_status();
+}
+
 Status ScatterSpec::validate() const {
   auto bad = [](const std::string& what) {
     return Error{Errc::kInvalidArgument, "scatter: " + what};
@@ -402,6 +460,12 @@ Result<Scene> parse_scene(const std::string& text,
   for (std::size_t i = 0; i < parts.size(); ++i) {
     config::MapReader r = root.element(parts[i], fmt::format("parts[{}]", i));
     read_part(r, catalogue, scene.classes, ids, scene.parts);
+    root.absorb(r);
+  }
+  const auto feeders = root.sequence("feeders", false);
+  for (std::size_t i = 0; i < feeders.size(); ++i) {
+    config::MapReader r = root.element(feeders[i], fmt::format("feeders[{}]", i));
+    read_feeder(r, catalogue, scene.classes, scene.feeders);
     root.absorb(r);
   }
   const auto scatter = root.sequence("scatter", false);

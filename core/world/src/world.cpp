@@ -104,6 +104,8 @@ std::string_view to_string(WorldEvent::Kind kind) noexcept {
       return "released";
     case WorldEvent::Kind::kFellOffBelt:
       return "fell_off_belt";
+    case WorldEvent::Kind::kFed:
+      return "fed";
   }
   return "unknown";
 }
@@ -237,8 +239,73 @@ Result<World> World::create(const Scene& scene,
     d.classes = {"dip14"};
     d.where = scene.source;
   }
+  for (const auto& f : scene.feeders) {
+    if (w.find_belt(f.belt) == nullptr) {
+      errors.push_back(fmt::format("{}: feeder: unknown belt '{}'", f.where, f.belt));
+      continue;
+    }
+    FeederState state;
+    state.spec = f;
+    state.next_s = f.period_s;
+    state.rng.seed(f.seed);
+    w.feeders_.push_back(std::move(state));
+  }
+  if (!errors.empty()) {
+    std::string message;
+    for (const auto& e : errors) {
+      message += (message.empty() ? "" : "\n") + e;
+    }
+    return Error{Errc::kConfig, message};
+  }
   w.seq_ = 1;
   return w;
+}
+
+std::pair<std::uint32_t, std::uint64_t> World::feeder_counts(std::string_view belt_id) const {
+  for (const auto& f : feeders_) {
+    if (f.spec.belt == belt_id) {
+      return {f.fed, f.jammed};
+    }
+  }
+  return {0, 0};
+}
+
+void World::step_feeders(std::vector<WorldEvent>& events) {
+  for (FeederState& f : feeders_) {
+    while (time_s_ >= f.next_s && (f.spec.count == 0 || f.fed < f.spec.count)) {
+      f.next_s += f.spec.period_s;
+      const Belt* belt = find_belt(f.spec.belt);
+      if (belt == nullptr) {
+        break;
+      }
+      const std::size_t k =
+          static_cast<std::size_t>(uniform(f.rng, 0.0, static_cast<double>(f.spec.classes.size())));
+      const double lateral = uniform(f.rng, -f.spec.lateral_mm, f.spec.lateral_mm);
+      const double yaw = uniform(f.rng, f.spec.yaw_min, f.spec.yaw_max);
+      const Eigen::Vector3d dir = belt->spec.direction();
+      const Eigen::Vector3d across(-dir.y(), dir.x(), 0.0);
+      const Eigen::Vector3d at = belt->spec.origin_mm + dir * f.spec.start_mm + across * lateral;
+      PartPlacement p;
+      p.class_name = f.spec.classes[std::min(k, f.spec.classes.size() - 1)];
+      p.x_mm = at.x();
+      p.y_mm = at.y();
+      p.yaw = yaw;
+      WorldEvent e;
+      e.kind = WorldEvent::Kind::kFed;
+      e.time_s = time_s_;
+      e.belt_id = f.spec.belt;
+      auto id = spawn(p, min_separation_mm_);
+      if (id) {
+        ++f.fed;
+        e.part_id = *id;
+        e.detail = fmt::format("{} fed onto {}", p.class_name, f.spec.belt);
+      } else {
+        ++f.jammed;
+        e.detail = fmt::format("jammed: {}", id.error().message);
+      }
+      events.push_back(std::move(e));
+    }
+  }
 }
 
 std::string World::next_id() {
@@ -532,6 +599,7 @@ void World::step(double dt_s, std::vector<WorldEvent>& events) {
     step_belt(i, dt_s, events);
   }
   time_s_ += dt_s;
+  step_feeders(events);
 }
 
 void World::step_belt(std::size_t belt_index, double dt_s, std::vector<WorldEvent>& events) {

@@ -283,6 +283,59 @@ TEST(WorldBelt, AdvancesSpeedTimesTimeAndCountsPerMmTimesDistance) {
   }
 }
 
+// A feeder puts a part on the belt every period_s; the same seed gives the same stream; a part
+// that would land on one still at the feed point is not fed but counted as jammed.
+TEST(WorldFeeder, FeedsAtItsPeriodDeterministicallyAndCountsJams) {
+  auto run = [&](double speed, double lateral = 50.0) {
+    const std::string feeder = fmt::format(
+        "feeders:\n  - {{belt: b1, classes: [dip14, dip8], period_s: 0.5, start_mm: 40, "
+        "lateral_mm: {}, yaw_deg: [-30, 30], seed: 7}}\n",
+        lateral);
+    World w = make_world(fmt::format(
+        "table: {{height_mm: 750}}\nbelts:\n  - {{id: b1, origin_mm: [0, 0, 760], "
+        "direction_deg: 0, length_mm: 2000, width_mm: 300, speed_mm_s: {}, mm_per_count: 0.05, "
+        "photocell_at_mm: 500}}\n{}",
+        speed, feeder));
+    std::vector<WorldEvent> events;
+    for (int i = 0; i < 2050; ++i) {  // 2.05 s: feeds at 0.5, 1.0, 1.5 and 2.0 s
+      w.step(0.001, events);
+    }
+    return std::pair{std::move(w), std::move(events)};
+  };
+  auto [w, events] = run(500.0);
+  EXPECT_EQ(w.feeder_counts("b1"), (std::pair<std::uint32_t, std::uint64_t>{4, 0}));
+  ASSERT_EQ(w.parts().size(), 4U);
+  for (const Part& p : w.parts()) {
+    EXPECT_EQ(p.support_name, "belt/b1");
+    EXPECT_LE(std::abs(p.world_T_part.translation().y()), 50.0 + 1e-9);
+  }
+  // The first part, fed at 0.5 s 40 mm along, has travelled 1.55 s x 500 mm/s since.
+  EXPECT_NEAR(w.parts()[0].world_T_part.translation().x(), 40.0 + 1.55 * 500.0, 1.0);
+  auto again = run(500.0);
+  for (std::size_t i = 0; i < 4; ++i) {
+    EXPECT_TRUE(again.first.parts()[i].world_T_part.isApprox(w.parts()[i].world_T_part, 1e-12));
+  }
+  // A stopped belt, every part fed on the centre line: each later one would land on the first.
+  auto [stopped, stopped_events] = run(0.0, 0.0);
+  EXPECT_EQ(stopped.feeder_counts("b1").first, 1U);
+  EXPECT_EQ(stopped.feeder_counts("b1").second, 3U);
+  int jams = 0;
+  for (const auto& e : stopped_events) {
+    jams += e.kind == WorldEvent::Kind::kFed && e.part_id.empty() ? 1 : 0;
+  }
+  EXPECT_EQ(jams, 3);
+}
+
+TEST(WorldFeeder, ABadFeederIsRefusedWithItsLine) {
+  const Catalogue catalogue = Catalogue::standard();
+  auto scene = parse_scene(
+      "table: {height_mm: 750}\nfeeders:\n  - {belt: b9, classes: [dip99], period_s: 0}\n",
+      "s.yaml", catalogue);
+  ASSERT_FALSE(scene);
+  EXPECT_THAT(scene.error().message, HasSubstr("s.yaml:3:"));
+  EXPECT_THAT(scene.error().message, HasSubstr("unknown part class 'dip99'"));
+}
+
 TEST(WorldBelt, TheEncoderSignFollowsTheConfig) {
   World w = belt_world("", 100.0, -1);
   std::vector<WorldEvent> events;

@@ -290,6 +290,13 @@ void SimWorldService::publish_events() {
       case world::WorldEvent::Kind::kReleased:
         log::info(to_string(e.kind), e.detail, {{"part", e.part_id}, {"robot", e.robot_id}});
         break;
+      case world::WorldEvent::Kind::kFed:
+        if (e.part_id.empty()) {
+          ctx_.events().publish(cell_health_SEVERITY_WARNING, "world.feeder_jammed", e.detail);
+        } else {
+          log::debug("feeder", e.detail, {{"part", e.part_id}, {"belt", e.belt_id}});
+        }
+        break;
     }
   }
   if (!events_.empty()) {

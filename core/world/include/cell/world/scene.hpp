@@ -97,6 +97,29 @@ struct ScatterSpec {
   Status validate() const;
 };
 
+/// A feeder that puts parts on a belt at a steady rate (a vibratory bowl or an upstream
+/// machine): every `period_s` of world time, a part of one of `classes` (drawn uniformly) is
+/// spawned `start_mm` along the belt from its upstream end, `lateral_mm` at most to either side
+/// of the centre line and at a yaw in [yaw_min, yaw_max], all drawn from its own seeded
+/// generator (same spec and seed: the same stream). A part that would overlap one still there
+/// is not fed (counted as jammed). `count` > 0 stops the feeder after that many parts.
+struct FeederSpec {
+  std::string belt;
+  std::vector<std::string> classes;
+  double period_s = 1.0;
+  double start_mm = 30.0;
+  double lateral_mm = 0.0;
+  double yaw_min = -3.14159265358979323846;  ///< [rad], about the vertical, world frame
+  double yaw_max = 3.14159265358979323846;
+  std::uint32_t count = 0;
+  std::uint64_t seed = 1;
+  std::string where;
+
+  /// Ok, or kInvalidArgument naming the field (empty belt or classes, period <= 0, negative
+  /// start or lateral, yaw_min > yaw_max).
+  Status validate() const;
+};
+
 /// A whole scene as read from a file. Nothing is checked against geometry yet (overlaps, what
 /// is under a part): World::create does that and names each part's `where`.
 struct Scene {
@@ -108,6 +131,7 @@ struct Scene {
   std::vector<BeltSpec> belts;
   std::vector<PartPlacement> parts;
   std::vector<ScatterSpec> scatter;  ///< run in order after `parts`
+  std::vector<FeederSpec> feeders;   ///< run by World::step
 };
 
 /// Parses a scene from YAML text; `origin` names it in errors ("config/scenes/x.yaml",

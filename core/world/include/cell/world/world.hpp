@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <random>
 #include <set>
 #include <string>
 #include <string_view>
@@ -99,6 +100,7 @@ struct WorldEvent {
     kMissed,       ///< a gripper closed on nothing (detail: the nearest grasp point and why)
     kReleased,     ///< a gripper let part_id go; it now rests on `support`
     kFellOffBelt,  ///< part_id passed the end of belt_id and now rests on `support`
+    kFed,          ///< a feeder put part_id on belt_id (or, with detail "jammed", could not)
   };
   Kind kind = Kind::kPhotocell;
   double time_s = 0.0;  ///< world time of the event (photocell: interpolated to the edge)
@@ -111,7 +113,7 @@ struct WorldEvent {
   std::string detail;   ///< a sentence for logs
 };
 
-/// "photocell", "attached", "missed", "released", "fell_off_belt".
+/// "photocell", "attached", "missed", "released", "fell_off_belt", "fed".
 std::string_view to_string(WorldEvent::Kind kind) noexcept;
 
 /// The world. Copyable (a copy is an independent world). Not thread-safe: one thread drives it
@@ -191,6 +193,8 @@ class World {
   double min_separation_mm() const noexcept { return min_separation_mm_; }
   /// The generator scatter requests use when they give only count, classes and seed.
   const ScatterSpec& default_scatter() const noexcept { return default_scatter_; }
+  /// Parts fed and jammed so far by the feeder of `belt_id` (0, 0 without one).
+  std::pair<std::uint32_t, std::uint64_t> feeder_counts(std::string_view belt_id) const;
   /// World time [s]: the sum of every step's dt.
   double time_s() const noexcept { return time_s_; }
   /// Increments on every change of the part set or of a part's support (spawn, remove,
@@ -242,6 +246,15 @@ class World {
   std::vector<Part> parts_;
   std::vector<RobotSlot> robots_;
   ScatterSpec default_scatter_;
+  struct FeederState {
+    FeederSpec spec;
+    double next_s = 0.0;       // world time of the next part
+    std::uint32_t fed = 0;
+    std::uint64_t jammed = 0;
+    std::mt19937_64 rng;       // seeded with spec.seed: the same stream every run
+  };
+  std::vector<FeederState> feeders_;
+  void step_feeders(std::vector<WorldEvent>& events);
   double min_separation_mm_ = 0.0;
   double time_s_ = 0.0;
   std::uint64_t seq_ = 0;
