@@ -1,0 +1,150 @@
+#include "cell/task/job_spec.hpp"
+
+#include <fstream>
+#include <iterator>
+#include <numbers>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "cell/kinematics/robot_config.hpp"
+#include "cell/testing/env.hpp"
+#include "cell/testing/matchers.hpp"
+
+namespace cell::task {
+namespace {
+
+using ::cell::testing::IsOk;
+using ::testing::HasSubstr;
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+struct Cell {
+  kinematics::RobotModel ibm7545 = *kinematics::load_robot(cell::testing::source_dir() +
+                                                           "/config/robots/ibm7545.yaml");
+  world::Catalogue catalogue = world::Catalogue::standard();
+  RobotLookup robots() const {
+    return [this](std::string_view id) -> const kinematics::RobotModel* {
+      return id == "ibm7545" ? &ibm7545 : nullptr;
+    };
+  }
+  CellFacts facts() const {
+    CellFacts f;
+    f.robots = robots();
+    f.catalogue = &catalogue;
+    f.cameras = {"ibm7545_eye"};
+    f.belts = {"belt1"};
+    // config/sim-world.yaml: the table top lies 231.51 mm below the 7545's flange at Z = 0.
+    f.working_plane_z_mm = [](std::string_view) -> std::optional<double> { return -231.51; };
+    return f;
+  }
+};
+
+const char* kThesisJob = R"(kind: table_pick_place
+robot: ibm7545
+camera: ibm7545_eye
+windows:
+  - joints: [45, 105, 0, 0]
+classes: [dip14, ic_7x30]
+place:
+  pattern: column
+  origin_mm: [-250, 250]
+  count: 5
+  pitch_mm: 30
+)";
+
+// Digest 000 §6: Out_pos is a column at X = -250 mm from Y = 250 mm, 30 mm pitch.
+TEST(JobSpec, TheThesisJobParsesWithItsOutputColumn) {
+  const Cell cell;
+  auto job = parse_job_spec(kThesisJob, "<job>", cell.robots());
+  ASSERT_THAT(job, IsOk());
+  EXPECT_EQ(job->kind, JobKind::kTablePickPlace);
+  const TablePickPlaceSpec* t = job->table();
+  ASSERT_NE(t, nullptr);
+  ASSERT_EQ(t->windows.size(), 1U);
+  EXPECT_NEAR(t->windows[0][0], 45 * kDeg, 1e-12);
+  EXPECT_NEAR(t->windows[0][1], 105 * kDeg, 1e-12);
+  ASSERT_EQ(t->place.slots.size(), 5U);
+  EXPECT_EQ(t->place.slots[4].x_mm, -250.0);
+  EXPECT_EQ(t->place.slots[4].y_mm, 370.0);
+  EXPECT_EQ(t->travel_z_mm, -200.0);
+  EXPECT_THAT(check_job(*job, cell.facts()), IsOk());
+}
+
+TEST(JobSpec, TheShippedExampleJobsParseAndCheck) {
+  const Cell cell;
+  for (const char* name : {"table_ics.yaml"}) {
+    std::ifstream f(cell::testing::source_dir() + "/config/jobs/" + name);
+    const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    auto job = parse_job_spec(text, name, cell.robots());
+    ASSERT_THAT(job, IsOk()) << name;
+    EXPECT_THAT(check_job(*job, cell.facts()), IsOk()) << name;
+  }
+}
+
+TEST(JobSpec, EveryErrorIsReportedWithItsLine) {
+  const Cell cell;
+  const std::string text = R"(kind: table_pick_place
+robot: ibm7545
+camera: ibm7545_eye
+windows:
+  - joints: [45, 105, 0]
+speed_scale: 2
+colour: red
+place:
+  pattern: spiral
+)";
+  auto job = parse_job_spec(text, "job.yaml", cell.robots());
+  ASSERT_FALSE(job);
+  const std::string& m = job.error().message;
+  EXPECT_THAT(m, HasSubstr("job.yaml:5:"));
+  EXPECT_THAT(m, HasSubstr("has 4 joints, got 3 values"));
+  EXPECT_THAT(m, HasSubstr("speed_scale"));
+  EXPECT_THAT(m, HasSubstr("colour"));
+  EXPECT_THAT(m, HasSubstr("list, row, column or grid, got 'spiral'"));
+}
+
+TEST(JobSpec, AnUnknownRobotOrKindIsNamed) {
+  const Cell cell;
+  auto job = parse_job_spec("kind: juggling\nrobot: r2d2\n", "job.yaml", cell.robots());
+  ASSERT_FALSE(job);
+  EXPECT_THAT(job.error().message, HasSubstr("unknown robot 'r2d2'"));
+  EXPECT_THAT(job.error().message, HasSubstr("got 'juggling'"));
+  EXPECT_FALSE(parse_job_spec("- not\n- a map\n", "job.yaml", cell.robots()));
+  EXPECT_FALSE(parse_job_spec("kind: [unterminated\n", "job.yaml", cell.robots()));
+}
+
+TEST(CheckJob, UnreachableSlotsUnknownClassesAndCamerasAreAllReported) {
+  const Cell cell;
+  std::string text = kThesisJob;
+  text.replace(text.find("[dip14, ic_7x30]"), 16, "[dip14, dip99]");
+  text.replace(text.find("[-250, 250]"), 11, "[600, 300]");  // beyond 650 mm of reach
+  text.replace(text.find("camera: ibm7545_eye"), 19, "camera: cam9");
+  auto job = parse_job_spec(text, "job.yaml", cell.robots());
+  ASSERT_THAT(job, IsOk());
+  const Status s = check_job(*job, cell.facts());
+  ASSERT_FALSE(s);
+  EXPECT_THAT(s.error().message, HasSubstr("unknown part class 'dip99'"));
+  EXPECT_THAT(s.error().message, HasSubstr("unknown camera 'cam9'"));
+  EXPECT_THAT(s.error().message, HasSubstr("place slot 0 at (600.0, 300.0"));
+}
+
+TEST(CheckJob, AWindowOutsideTheJointLimitsIsRefused) {
+  const Cell cell;
+  std::string text = kThesisJob;
+  text.replace(text.find("[45, 105, 0, 0]"), 15, "[45, 105, 400, 0]");  // Z beyond 250 mm
+  auto job = parse_job_spec(text, "job.yaml", cell.robots());
+  ASSERT_THAT(job, IsOk());
+  EXPECT_THAT(check_job(*job, cell.facts()).error().message, HasSubstr("window 0"));
+}
+
+TEST(GraspPose, AScaraToolPointsUpAndASixAxisToolDown) {
+  const Cell cell;
+  const auto p = grasp_pose(cell.ibm7545, 100, 200, -227.7, 30 * kDeg);
+  EXPECT_NEAR(p.linear().col(2).z(), 1.0, 1e-12);
+  EXPECT_NEAR(std::atan2(p.linear()(1, 0), p.linear()(0, 0)), 30 * kDeg, 1e-12);
+  EXPECT_EQ(p.translation().z(), -227.7);
+}
+
+}  // namespace
+}  // namespace cell::task
