@@ -22,20 +22,25 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 struct Cell {
   kinematics::RobotModel ibm7545 = *kinematics::load_robot(cell::testing::source_dir() +
                                                            "/config/robots/ibm7545.yaml");
+  kinematics::RobotModel picker = *kinematics::load_robot(cell::testing::source_dir() +
+                                                          "/config/robots/scara_picker.yaml");
   world::Catalogue catalogue = world::Catalogue::standard();
   RobotLookup robots() const {
     return [this](std::string_view id) -> const kinematics::RobotModel* {
-      return id == "ibm7545" ? &ibm7545 : nullptr;
+      return id == "ibm7545" ? &ibm7545 : id == "scara_picker" ? &picker : nullptr;
     };
   }
   CellFacts facts() const {
     CellFacts f;
     f.robots = robots();
     f.catalogue = &catalogue;
-    f.cameras = {"ibm7545_eye"};
+    f.cameras = {"ibm7545_eye", "belt_cam"};
     f.belts = {"belt1"};
-    // config/sim-world.yaml: the table top lies 231.51 mm below the 7545's flange at Z = 0.
-    f.working_plane_z_mm = [](std::string_view) -> std::optional<double> { return -231.51; };
+    // config/sim-world.yaml: the table top lies 231.51 mm below the 7545's flange at Z = 0,
+    // belt1's surface 200 mm below the picker's.
+    f.working_plane_z_mm = [](std::string_view camera) -> std::optional<double> {
+      return camera == "belt_cam" ? -200.0 : -231.51;
+    };
     return f;
   }
 };
@@ -73,7 +78,7 @@ TEST(JobSpec, TheThesisJobParsesWithItsOutputColumn) {
 
 TEST(JobSpec, TheShippedExampleJobsParseAndCheck) {
   const Cell cell;
-  for (const char* name : {"table_ics.yaml"}) {
+  for (const char* name : {"table_ics.yaml", "conveyor_ics.yaml"}) {
     std::ifstream f(cell::testing::source_dir() + "/config/jobs/" + name);
     const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
     auto job = parse_job_spec(text, name, cell.robots());
