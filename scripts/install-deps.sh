@@ -9,8 +9,9 @@ PACKAGES=(
   libeigen3-dev libopencv-dev libceres-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libyaml-cpp-dev libspdlog-dev libfmt-dev libcli11-dev nlohmann-json3-dev
-  liborocos-kdl-dev
+  liborocos-kdl-dev libsqlite3-dev
   valgrind procps iproute2 openssl
+  libcpp-httplib-dev chromium
 )
 
 missing=()
@@ -20,15 +21,29 @@ for p in "${PACKAGES[@]}"; do
   fi
 done
 
-if [ ${#missing[@]} -eq 0 ]; then
-  exit 0
+# Node.js with npm for the web monitor's build (clients/monitor/web): Debian's, unless one is
+# installed already (a NodeSource nodejs carries its own npm and conflicts with Debian's).
+if ! command -v npm >/dev/null 2>&1; then
+  missing+=(nodejs npm)
 fi
 
-echo "install-deps: installing ${#missing[@]} package(s): ${missing[*]}" >&2
-SUDO=""
-if [ "$(id -u)" -ne 0 ]; then
-  SUDO="sudo"
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "install-deps: installing ${#missing[@]} package(s): ${missing[*]}" >&2
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then
+    SUDO="sudo"
+  fi
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+
+# The web monitor's npm packages (three, esbuild, playwright-core) from its package-lock.json,
+# only when node_modules is missing or older than the lock file (a no-op otherwise).
+web="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/clients/monitor/web"
+if [ -f "$web/package-lock.json" ] &&
+   { [ ! -d "$web/node_modules" ] || [ "$web/package-lock.json" -nt "$web/node_modules" ]; }; then
+  echo "install-deps: npm ci in clients/monitor/web" >&2
+  (cd "$web" && npm ci --no-audit --no-fund --loglevel=error)
+  touch "$web/node_modules"
+fi

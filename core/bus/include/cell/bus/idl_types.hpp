@@ -50,9 +50,13 @@ CELL_BUS_REGISTER(cell_world_WorldRequest);
 CELL_BUS_REGISTER(cell_world_WorldReply);
 CELL_BUS_REGISTER(cell_calibration_CameraCalibration);
 CELL_BUS_REGISTER(cell_calibration_BeltCalibration);
+CELL_BUS_REGISTER(cell_calibration_CalibrationRequest);
+CELL_BUS_REGISTER(cell_calibration_CalibrationProgress);
+CELL_BUS_REGISTER(cell_calibration_CalibrationResult);
 CELL_BUS_REGISTER(cell_task_JobRequest);
 CELL_BUS_REGISTER(cell_task_JobCommand);
 CELL_BUS_REGISTER(cell_task_JobStatus);
+CELL_BUS_REGISTER(cell_task_JobCommandReply);
 CELL_BUS_REGISTER(cell_bench_Small);
 CELL_BUS_REGISTER(cell_bench_Blob);
 

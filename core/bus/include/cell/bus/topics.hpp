@@ -84,6 +84,12 @@ inline constexpr TopicDef<cell_calibration_CameraCalibration> kCameraCalibration
     "cell/calibration/camera", QosProfile::kState};
 inline constexpr TopicDef<cell_calibration_BeltCalibration> kBeltCalibration{
     "cell/calibration/belt", QosProfile::kState};
+inline constexpr TopicDef<cell_calibration_CalibrationRequest> kCalibrationRequest{
+    "cell/calibration/request", QosProfile::kCommand};
+inline constexpr TopicDef<cell_calibration_CalibrationProgress> kCalibrationProgress{
+    "cell/calibration/progress", QosProfile::kRecent, 64};
+inline constexpr TopicDef<cell_calibration_CalibrationResult> kCalibrationResult{
+    "cell/calibration/result", QosProfile::kRecent, 32};
 // task.idl
 inline constexpr TopicDef<cell_task_JobRequest> kJobRequest{"cell/task/job_request",
                                                             QosProfile::kCommand};
@@ -91,6 +97,8 @@ inline constexpr TopicDef<cell_task_JobCommand> kJobCommand{"cell/task/job_comma
                                                             QosProfile::kCommand};
 inline constexpr TopicDef<cell_task_JobStatus> kJobStatus{"cell/task/job_status",
                                                           QosProfile::kState};
+inline constexpr TopicDef<cell_task_JobCommandReply> kJobCommandReply{
+    "cell/task/job_command_reply", QosProfile::kRecent, 64};
 
 // world.idl
 inline constexpr TopicDef<cell_world_BeltState> kBeltState{"cell/world/belt", QosProfile::kStream,

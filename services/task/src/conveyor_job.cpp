@@ -1,0 +1,509 @@
+// conveyor_pick: the conveyor chapter's two-stage scheme (digest 002 §1.3, §2), fixing the two
+// timing details its §2.4 names: the encoder count is the one latched at the exposure (not read
+// after recognition), and tracking goes on while the gripper closes (ALTOFF after the grip).
+//
+// Stage 1: the photocell triggers the belt camera; the vision service locates the parts and
+// tests their clear grips; the task predicts where each part will be when the robot can reach
+// it and refuses it if that is outside the conveyor belt window (downstream limit checked
+// before moving). Stage 2: the robot moves toward the part's position at exposure with ALTER
+// enabled (non-cumulative, world frame) and the task sends, every alter_period_s, the total
+// correction dir * mm_per_count * (count(t) - count at exposure) with its rate (the belt speed),
+// so the destination moves with the part; at arrival the gripper closes while tracking, then
+// ALTER off, depart, place.
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <thread>
+
+#include <fmt/format.h>
+
+#include "cell/bus/view.hpp"
+#include "cell/common/log.hpp"
+#include "cell/common/time.hpp"
+#include "cell/geometry/idl_pose.hpp"
+#include "job_run.hpp"
+
+namespace cell::task_service {
+namespace {
+
+using json = nlohmann::json;
+using namespace std::chrono_literals;
+
+struct Belt {
+  double mm_per_count = 0.0;
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitX();  // base frame, unit
+  Eigen::Vector3d nearest = Eigen::Vector3d::Zero();     // base frame [mm]
+  std::string source;
+};
+
+std::string fresh(const JobRun& run, const char* what, int seq) {
+  static thread_local std::mt19937_64 rng{std::random_device{}()};
+  return run.motion_id(fmt::format("{}{}-{:06x}", what, seq, rng() & 0xFFFFFF));
+}
+
+class ConveyorJob {
+ public:
+  explicit ConveyorJob(JobRun& run) : run_(run), spec_(*run.spec().conveyor()) {
+    for (const auto& b : run.config().belts) {
+      if (b.id == spec_.belt) {
+        nominal_.mm_per_count = b.mm_per_count;
+        nominal_.direction = b.direction;
+        nominal_.nearest = b.nearest_mm;
+        nominal_.source = "nominal (config/task.yaml)";
+      }
+    }
+    for (const auto& c : run.config().cameras) {
+      if (c.id == spec_.camera) {
+        plane_z_ = c.working_plane_z_mm;
+      }
+    }
+  }
+
+  ExecResult run() {
+    json& p = run_.progress();
+    if (!p.contains("started_ns")) {
+      p["started_ns"] = wall_time_ns();
+      p["elapsed_s"] = 0.0;
+      p["seq"] = 0;
+      p["slot"] = 0;
+      p["holding"] = nullptr;
+    }
+    elapsed_before_ = p["elapsed_s"].get<double>();
+    resumed_at_ = Clock::now();
+    if (!p["holding"].is_null()) {
+      if (auto r = finish_holding(); r) {
+        return *r;
+      }
+    }
+    for (;;) {
+      if (auto r = stop_if(run_.hold_if_paused()); r) {
+        return *r;
+      }
+      if (finished()) {
+        break;
+      }
+      const Belt belt = current_belt();
+      run_.report(fmt::format("waiting for a part on {} ({} picked)", spec_.belt, picked()),
+                  fraction());
+      auto frame = run_.links().locate(
+          spec_.camera, cell_vision_TRIGGER_PHOTOCELL,
+          std::chrono::milliseconds(
+              static_cast<std::int64_t>(run_.config().photocell_timeout_s * 1000)),
+          run_.control());
+      if (auto r = stop_if(interrupt_of(run_.control())); r) {
+        return *r;
+      }
+      if (!frame) {
+        if (finished()) {
+          break;
+        }
+        // No part came (or the camera is not answering): keep waiting while the job runs.
+        log::info("job", "no frame from the belt camera", {{"job", run_.job_id()},
+                                                           {"why", frame.error().message}});
+        continue;
+      }
+      if (!frame->error.empty()) {
+        run_.count("locate_failed");
+        (void)run_.step("frame not processed", {{"error", frame->error}});
+        continue;
+      }
+      if (frame->parts.empty()) {
+        run_.count("locate_failed");
+        (void)run_.step("nothing located", {{"count", frame->belt_count}});
+        continue;
+      }
+      // Downstream first: the part nearest the end of the window has the least time left.
+      std::vector<Located> parts = frame->parts;
+      std::sort(parts.begin(), parts.end(), [&](const Located& a, const Located& b) {
+        return along(belt, a) > along(belt, b);
+      });
+      for (const Located& part : parts) {
+        if (auto r = stop_if(interrupt_of(run_.control())); r) {
+          return *r;
+        }
+        if (auto r = take(part, *frame, belt); r) {
+          return *r;
+        }
+      }
+    }
+    p["elapsed_s"] = elapsed();
+    if (auto s = run_.step("done"); !s) {
+      return ExecResult::failed(s.error().message);
+    }
+    return ExecResult::done();
+  }
+
+ private:
+  std::optional<ExecResult> stop_if(Interrupt i) {
+    if (i == Interrupt::kCancel) {
+      return ExecResult::cancelled();
+    }
+    if (i == Interrupt::kStop) {
+      run_.progress()["elapsed_s"] = elapsed();
+      return ExecResult::stopped();
+    }
+    return std::nullopt;
+  }
+
+  double elapsed() const {
+    return elapsed_before_ + std::chrono::duration<double>(Clock::now() - resumed_at_).count();
+  }
+  std::uint32_t picked() const {
+    auto it = run_.counters().find("picked");
+    return it != run_.counters().end() ? it->second : 0;
+  }
+  bool finished() const {
+    return (spec_.duration_s > 0 && elapsed() >= spec_.duration_s) ||
+           (spec_.max_parts > 0 && picked() >= static_cast<std::uint32_t>(spec_.max_parts));
+  }
+  double fraction() const {
+    if (spec_.max_parts > 0) {
+      return std::min(1.0, static_cast<double>(picked()) / spec_.max_parts);
+    }
+    return spec_.duration_s > 0 ? std::min(1.0, elapsed() / spec_.duration_s) : 0.0;
+  }
+
+  Belt current_belt() {
+    Belt b = nominal_;
+    if (auto cal = run_.links().belt_calibration(spec_.belt);
+        cal && cal->robot_id == run_.robot().id()) {
+      b.mm_per_count = cal->mm_per_count;
+      b.direction = cal->direction;
+      b.source = "calibration " + cal->version;
+    }
+    return b;
+  }
+
+  /// Position of a part along the belt's travel, from the point nearest the robot [mm].
+  static double along(const Belt& belt, const Located& l) {
+    return (Eigen::Vector3d(l.x_mm, l.y_mm, belt.nearest.z()) - belt.nearest).dot(belt.direction);
+  }
+
+  double grasp_z(const std::string& class_name, int& symmetry) const {
+    auto cls = run_.catalogue().find(class_name);
+    symmetry = cls ? cls->yaw_symmetry : 1;
+    if (spec_.pick_z_mm) {
+      return *spec_.pick_z_mm;
+    }
+    return plane_z_ + (cls ? cls->part_T_grasp.translation().z() : 0.0);
+  }
+
+  void record(const Located& l, cell_task_PartOutcome outcome, const std::string& detail) {
+    PartRecord rec;
+    rec.index = static_cast<std::uint32_t>(run_.parts().size());
+    rec.class_name = l.class_name;
+    rec.picked_x_mm = l.x_mm;
+    rec.picked_y_mm = l.y_mm;
+    rec.picked_yaw_rad = l.yaw_rad;
+    rec.outcome = outcome;
+    rec.detail = detail;
+    // A long stream: keep the last 200 parts in the status; the counters keep the totals.
+    auto& parts = run_.parts();
+    if (parts.size() >= 200) {
+      parts.erase(parts.begin());
+    }
+    parts.push_back(rec);
+  }
+
+  /// Stage 1 and 2 for one located part. Parts that cannot be taken are counted by cause.
+  std::optional<ExecResult> take(const Located& part, const Frame& frame, const Belt& belt) {
+    json& p = run_.progress();
+    if (!part.has_pose) {
+      run_.count("locate_failed");
+      record(part, cell_task_PART_LOCATE_FAILED, "no pose in the robot frame");
+      return std::nullopt;
+    }
+    if (part.grip == cell_vision_GRIP_BLOCKED) {
+      run_.count("grip_blocked");
+      record(part, cell_task_PART_SKIPPED_GRIP_BLOCKED, part.grip_detail);
+      return std::nullopt;
+    }
+    const auto reading = run_.links().belt(spec_.belt);
+    if (!reading) {
+      return ExecResult::failed(fmt::format("no encoder reading of belt '{}' on the bus",
+                                            spec_.belt));
+    }
+    const Eigen::Vector3d v_belt = belt.direction * reading->speed_mm_per_s;
+    auto shift_at = [&](std::int64_t count) {
+      return belt.direction * (belt.mm_per_count * static_cast<double>(count - frame.belt_count));
+    };
+    int symmetry = 1;
+    const double z = grasp_z(part.class_name, symmetry);
+    // The robot's tool yaw nearest its current one among the part's symmetric yaws.
+    const RobotView now = run_.links().robot(run_.robot().id());
+    double yaw = part.yaw_rad;
+    if (symmetry > 0 && now.known) {
+      const double tool_yaw = std::atan2(now.base_T_tool.linear()(1, 0),
+                                         now.base_T_tool.linear()(0, 0));
+      const double step = 2 * std::numbers::pi / symmetry;
+      yaw = part.yaw_rad + step * std::round((tool_yaw - part.yaw_rad) / step);
+    }
+    // TRACK toward the part's position at exposure: ALTER carries it from there.
+    const Eigen::Isometry3d at_exposure = task::grasp_pose(run_.robot(), part.x_mm, part.y_mm, z,
+                                                           yaw);
+    const int seq = p["seq"].get<int>() + 1;
+    p["seq"] = seq;
+    const std::string track_id = fresh(run_, "track", seq);
+    cell_motion_MotionRequest r{};
+    const std::string robot_id = run_.robot().id();
+    r.motion_id = bus::borrow(track_id);
+    r.robot_id = bus::borrow(robot_id);
+    r.kind = cell_motion_MOTION_TRACK;
+    r.target = geometry::pose_to_idl(at_exposure);
+    r.speed_scale = spec_.speed_scale;
+    r.alter_cumulative = false;
+    r.alter_world_frame = true;
+    auto sent = run_.links().send_motion(r);
+    if (!sent) {
+      return ExecResult::failed(sent.error().message);
+    }
+    run_.report(fmt::format("tracking part ({} picked)", picked()), fraction());
+    // Stage 2: ALTER every cycle until the motion arrives; the downstream limit is checked as
+    // soon as the planned duration is known, before the robot has gone far.
+    std::uint64_t cycle = 0;
+    std::int64_t accepted_ns = 0;  // wall clock when the motion service took the track
+    bool checked = false;
+    bool arrived = false;
+    std::string trajectory_id;
+    auto next = Clock::now();
+    const auto give_up = Clock::now() + std::chrono::milliseconds(static_cast<std::int64_t>(
+                                            run_.config().motion_timeout_s * 1000));
+    while (!arrived) {
+      if (control_interrupted()) {
+        stop_robot();
+        return stop_if(interrupt_of(run_.control()));
+      }
+      if (Clock::now() > give_up) {
+        stop_robot();
+        return ExecResult::failed("tracking motion did not end in time");
+      }
+      if (auto u = run_.links().poll_motion(*sent); u) {
+        if (accepted_ns == 0 && u->state != cell_motion_MOTION_REFUSED) {
+          accepted_ns = wall_time_ns();
+        }
+        if (!checked && u->duration_s > 0) {
+          checked = true;
+          const auto reading_now = run_.links().belt(spec_.belt);
+          const double travel_left_s = u->duration_s;
+          const std::int64_t count_now = reading_now ? reading_now->count : frame.belt_count;
+          const Eigen::Vector3d final_pos = Eigen::Vector3d(part.x_mm, part.y_mm, belt.nearest.z()) +
+                                            shift_at(count_now) + v_belt * travel_left_s;
+          const double s = (final_pos - belt.nearest).dot(belt.direction);
+          if (s > spec_.downstream_mm || s < spec_.upstream_mm) {
+            stop_robot();
+            run_.count("outside_window");
+            record(part, cell_task_PART_SKIPPED_OUTSIDE_WINDOW,
+                   fmt::format("the grasp would be {:.0f} mm along the belt, outside the window "
+                               "[{:.0f}, {:.0f}] mm",
+                               s, spec_.upstream_mm, spec_.downstream_mm));
+            (void)wait_terminal(*sent);
+            return recover_after_stop();
+          }
+        }
+        if (u->terminal) {
+          if (u->state != cell_motion_MOTION_DONE) {
+            run_.count("motion_failed");
+            record(part, cell_task_PART_MISSED, u->reason);
+            return recover_after_stop();
+          }
+          arrived = true;
+        }
+      }
+      const RobotView v = run_.links().robot(robot_id);
+      if (!v.trajectory_id.empty()) {
+        trajectory_id = v.trajectory_id;
+      }
+      if (!trajectory_id.empty()) {
+        const auto reading_now = run_.links().belt(spec_.belt);
+        if (reading_now) {
+          (void)run_.links().alter(robot_id, trajectory_id, ++cycle, shift_at(reading_now->count),
+                                   v_belt);
+        }
+      }
+      next += std::chrono::duration_cast<Clock::duration>(
+          std::chrono::duration<double>(spec_.alter_period_s));
+      std::this_thread::sleep_until(next);
+    }
+    // At the part, still tracking: close the gripper, keep tracking through the dwell.
+    (void)run_.links().command(robot_id, cell_robot_CMD_GRIPPER_CLOSE, 2000ms);
+    const auto grip_end = Clock::now() + std::chrono::duration<double>(spec_.dwell_s);
+    while (Clock::now() < grip_end) {
+      const auto reading_now = run_.links().belt(spec_.belt);
+      if (reading_now && !trajectory_id.empty()) {
+        (void)run_.links().alter(robot_id, trajectory_id, ++cycle, shift_at(reading_now->count),
+                                 v_belt);
+      }
+      std::this_thread::sleep_for(std::chrono::duration<double>(spec_.alter_period_s));
+    }
+    (void)run_.links().command(robot_id, cell_robot_CMD_ALTER_OFF, 2000ms);
+    // Held from here: journal the intent to place, then depart and place.
+    const task::Slot& slot =
+        spec_.place.slots[static_cast<std::size_t>(p["slot"].get<int>()) % spec_.place.slots.size()];
+    const double place_z = spec_.place_z_mm.value_or(z);
+    p["holding"] = {{"class", part.class_name},
+                    {"x", part.x_mm},
+                    {"y", part.y_mm},
+                    {"yaw", part.yaw_rad},
+                    {"pick_z", z},
+                    {"place_z", place_z},
+                    {"place_yaw", slot.yaw_rad + (yaw - part.yaw_rad)},
+                    {"depart_id", fresh(run_, "depart", seq)},
+                    {"place_id", fresh(run_, "place", seq)},
+                    {"stage", "depart"}};
+    // Exposure -> the tracking motion under way (the motion service planned it and handed it
+    // to the gateway): the chapter's stage-1 latency (bench/task).
+    const double exposure_to_track_ms =
+        accepted_ns > 0 ? static_cast<double>(accepted_ns - frame.exposure_ns) * 1e-6 : -1.0;
+    if (auto s = run_.step("gripped", {{"class", part.class_name},
+                                       {"exposure_to_track_ms", exposure_to_track_ms},
+                                       {"vision_ms", frame.processing_ms}});
+        !s) {
+      return ExecResult::failed(s.error().message);
+    }
+    return finish_holding();
+  }
+
+  /// Depart and place the part held in progress["holding"] (also after a restart).
+  std::optional<ExecResult> finish_holding() {
+    json& p = run_.progress();
+    json& h = p["holding"];
+    const std::string robot_id = run_.robot().id();
+    for (;;) {
+      const bool departing = h["stage"] == "depart";
+      const std::string id = h[departing ? "depart_id" : "place_id"].get<std::string>();
+      if (auto done = run_.links().motion_status(id, 0ms);
+          done && done->state == cell_motion_MOTION_DONE) {
+        // Done before a restart.
+      } else {
+        cell_motion_MotionRequest r{};
+        r.motion_id = bus::borrow(id);
+        r.speed_scale = spec_.speed_scale;
+        if (departing) {
+          r.kind = cell_motion_MOTION_DEPART;
+          r.distance_mm = std::max(10.0, spec_.travel_z_mm - h["pick_z"].get<double>());
+        } else {
+          const task::Slot& slot = spec_.place.slots[static_cast<std::size_t>(
+                                                         p["slot"].get<int>()) %
+                                                     spec_.place.slots.size()];
+          r.kind = cell_motion_MOTION_PLACE;
+          r.target = geometry::pose_to_idl(task::grasp_pose(
+              run_.robot(), slot.x_mm, slot.y_mm, h["place_z"].get<double>(),
+              h["place_yaw"].get<double>()));
+          r.distance_mm = std::max(10.0, spec_.travel_z_mm - h["place_z"].get<double>());
+        }
+        auto o = run_.move(r, departing ? "departing" : "placing");
+        if (!o) {
+          return ExecResult::failed(o.error().message);
+        }
+        if (o->interrupted == Interrupt::kStop || run_.control().stop.load()) {
+          return ExecResult::stopped();
+        }
+        if (o->interrupted == Interrupt::kCancel || run_.control().cancel.load()) {
+          return ExecResult::cancelled();
+        }
+        if (o->robot_fault) {
+          if (run_.pause_for_robot(o->reason) != Interrupt::kNone) {
+            return stop_if(interrupt_of(run_.control()));
+          }
+          h[departing ? "depart_id" : "place_id"] =
+              fresh(run_, departing ? "depart" : "place", p["seq"].get<int>());
+          continue;
+        }
+        if (!o->ok()) {
+          Located l;
+          l.class_name = h["class"].get<std::string>();
+          record(l, cell_task_PART_MISSED, o->reason);
+          run_.count("place_failed");
+          p["holding"] = nullptr;
+          if (auto s = run_.step("place failed", {{"why", o->reason}}); !s) {
+            return ExecResult::failed(s.error().message);
+          }
+          return std::nullopt;
+        }
+      }
+      if (departing) {
+        h["stage"] = "place";
+        if (auto s = run_.step("departed"); !s) {
+          return ExecResult::failed(s.error().message);
+        }
+        continue;
+      }
+      Located l;
+      l.class_name = h["class"].get<std::string>();
+      l.x_mm = h["x"].get<double>();
+      l.y_mm = h["y"].get<double>();
+      l.yaw_rad = h["yaw"].get<double>();
+      record(l, cell_task_PART_PLACED, "");
+      const std::size_t slot_index =
+          static_cast<std::size_t>(p["slot"].get<int>()) % spec_.place.slots.size();
+      auto& rec = run_.parts().back();
+      rec.placed_x_mm = spec_.place.slots[slot_index].x_mm;
+      rec.placed_y_mm = spec_.place.slots[slot_index].y_mm;
+      rec.placed_yaw_rad = spec_.place.slots[slot_index].yaw_rad;
+      p["slot"] = p["slot"].get<int>() + 1;
+      p["holding"] = nullptr;
+      p["elapsed_s"] = elapsed();
+      run_.count("picked");
+      if (auto s = run_.step("placed"); !s) {
+        return ExecResult::failed(s.error().message);
+      }
+      return std::nullopt;
+    }
+  }
+
+  bool control_interrupted() const { return run_.control().interrupted(); }
+
+  void stop_robot() {
+    cell_motion_MotionRequest stop{};
+    const std::string id = run_.job_id() + "/stop";
+    const std::string robot_id = run_.robot().id();
+    stop.motion_id = bus::borrow(id);
+    stop.robot_id = bus::borrow(robot_id);
+    stop.kind = cell_motion_MOTION_STOP;
+    (void)run_.links().send_motion(stop);
+  }
+
+  void wait_terminal(std::uint64_t seq) {
+    const auto until = Clock::now() + 5s;
+    while (Clock::now() < until) {
+      if (auto u = run_.links().poll_motion(seq); u && u->terminal) {
+        return;
+      }
+      std::this_thread::sleep_for(5ms);
+    }
+  }
+
+  /// After a stop (outside the window, a failed track): reset the robot, which holds where it
+  /// stopped, and go on with the next part.
+  std::optional<ExecResult> recover_after_stop() {
+    const std::string robot_id = run_.robot().id();
+    (void)run_.links().wait_robot(robot_id, [](const RobotView& v) { return !v.moving; }, 2000ms,
+                                  run_.control());
+    const RobotView v = run_.links().robot(robot_id);
+    if (v.mode == cell_robot_MODE_STOPPED) {
+      (void)run_.links().command(robot_id, cell_robot_CMD_RESET, 2000ms);
+    } else if (v.mode == cell_robot_MODE_FAULT) {
+      if (run_.pause_for_robot(v.fault_text) != Interrupt::kNone) {
+        return stop_if(interrupt_of(run_.control()));
+      }
+    }
+    (void)run_.links().command(robot_id, cell_robot_CMD_ALTER_OFF, 2000ms);
+    if (auto s = run_.step("part skipped"); !s) {
+      return ExecResult::failed(s.error().message);
+    }
+    return std::nullopt;
+  }
+
+  JobRun& run_;
+  const task::ConveyorPickSpec& spec_;
+  Belt nominal_;
+  double plane_z_ = 0.0;
+  double elapsed_before_ = 0.0;
+  Clock::time_point resumed_at_;
+};
+
+}  // namespace
+
+ExecResult run_conveyor_job(JobRun& run) { return ConveyorJob(run).run(); }
+
+}  // namespace cell::task_service
