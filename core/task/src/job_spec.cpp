@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <numbers>
 
 #include <fmt/format.h>
@@ -144,6 +145,22 @@ TablePickPlaceSpec read_table(config::MapReader& r, const kinematics::RobotModel
   r.optional("settle_s", s.settle_s);
   r.optional("max_retries", s.max_retries);
   r.optional("return_home", s.return_home);
+  if (r.has("lights")) {
+    std::string lights;
+    r.optional("lights", lights);
+    static const std::map<std::string, TablePickPlaceSpec::Lights> kLights = {
+        {"keep", TablePickPlaceSpec::Lights::kKeep},
+        {"off", TablePickPlaceSpec::Lights::kOff},
+        {"fluorescent", TablePickPlaceSpec::Lights::kFluorescent},
+        {"halogen", TablePickPlaceSpec::Lights::kHalogen},
+        {"both", TablePickPlaceSpec::Lights::kBoth}};
+    if (auto it = kLights.find(lights); it != kLights.end()) {
+      s.lights = it->second;
+    } else {
+      r.fail("lights",
+             fmt::format("must be keep, off, fluorescent, halogen or both, got '{}'", lights));
+    }
+  }
   speed(r, s.speed_scale);
   positive(r, "dwell_s", s.dwell_s, true);
   positive(r, "settle_s", s.settle_s, true);
@@ -178,6 +195,15 @@ ConveyorPickSpec read_conveyor(config::MapReader& r) {
   read_optional_height(r, "place_z_mm", s.place_z_mm);
   r.optional("dwell_s", s.dwell_s);
   r.optional("alter_period_s", s.alter_period_s);
+  if (r.has("ready_mm")) {
+    std::vector<double> xy;
+    r.optional("ready_mm", xy);
+    if (xy.size() == 2 && std::isfinite(xy[0]) && std::isfinite(xy[1])) {
+      s.ready_mm = Eigen::Vector2d(xy[0], xy[1]);
+    } else {
+      r.fail("ready_mm", fmt::format("must be [x, y] in mm, got {} value(s)", xy.size()));
+    }
+  }
   speed(r, s.speed_scale);
   positive(r, "duration_s", s.duration_s, true);
   positive(r, "dwell_s", s.dwell_s, true);
@@ -399,6 +425,15 @@ Status check_job(const JobSpec& job, const CellFacts& cell) {
       const auto pick = heights({}, c->camera, c->pick_z_mm);
       const auto place = c->place_z_mm ? std::vector<double>{*c->place_z_mm} : pick;
       check_slots(*robot, c->place, place, c->travel_z_mm, reasons);
+      if (c->ready_mm) {
+        PlacePattern ready;
+        ready.slots.push_back(Slot{c->ready_mm->x(), c->ready_mm->y(), 0.0});
+        std::vector<std::string> why;
+        check_slots(*robot, ready, {}, c->travel_z_mm, why);
+        for (auto& w : why) {
+          reasons.push_back("ready_mm: " + w.substr(w.find(" at (") + 1));
+        }
+      }
     }
   } else if (const auto* a = job.assembly(); a != nullptr) {
     for (const auto& [name, id] : a->cameras) {

@@ -8,10 +8,51 @@
 
 namespace cell::motion_service {
 
+namespace {
+
+/// The planner keys of `p` over `base` (the service's planner, or a robot's override of it).
+void read_planner(config::MapReader& p, motion::PlannerOptions& out) {
+  auto& lin = out.linear;
+  p.optional("linear_speed_mm_s", lin.max_speed_mm_s);
+  p.optional("linear_accel_mm_s2", lin.max_accel_mm_s2);
+  double angular_speed_deg = lin.max_angular_speed_rad_s * 180 / std::numbers::pi;
+  double angular_accel_deg = lin.max_angular_accel_rad_s2 * 180 / std::numbers::pi;
+  p.optional("angular_speed_deg_s", angular_speed_deg);
+  p.optional("angular_accel_deg_s2", angular_accel_deg);
+  lin.max_angular_speed_rad_s = angular_speed_deg * std::numbers::pi / 180;
+  lin.max_angular_accel_rad_s2 = angular_accel_deg * std::numbers::pi / 180;
+  p.optional("knot_period_s", lin.knot_period_s);
+  p.optional("gripper_dwell_s", out.gripper_dwell_s);
+  p.optional("approach_mm", out.default_approach_mm);
+  p.optional("via_settle_s", out.via_settle_s);
+  auto positive = [&](const char* key, double v) {
+    if (!(v > 0)) {
+      p.fail(key, fmt::format("must be > 0, got {}", v));
+    }
+  };
+  positive("linear_speed_mm_s", lin.max_speed_mm_s);
+  positive("linear_accel_mm_s2", lin.max_accel_mm_s2);
+  positive("angular_speed_deg_s", angular_speed_deg);
+  positive("angular_accel_deg_s2", angular_accel_deg);
+  positive("knot_period_s", lin.knot_period_s);
+  positive("approach_mm", out.default_approach_mm);
+  if (out.gripper_dwell_s < 0) {
+    p.fail("gripper_dwell_s", "must be >= 0");
+  }
+  if (out.via_settle_s < 0) {
+    p.fail("via_settle_s", "must be >= 0");
+  }
+}
+
+}  // namespace
+
 Result<MotionConfig> load_config(const config::Document& doc) {
   MotionConfig c;
   config::MapReader root(doc, doc.root, "");
   service::read_common(root, c.common);
+  config::MapReader p = root.child("planner", false);
+  read_planner(p, c.planner);
+  root.absorb(p);
   const auto robots = root.sequence("robots");
   for (std::size_t i = 0; i < robots.size(); ++i) {
     config::MapReader r = root.element(robots[i], fmt::format("robots[{}]", i));
@@ -19,6 +60,12 @@ Result<MotionConfig> load_config(const config::Document& doc) {
     r.required("id", entry.id);
     r.required("config", entry.config);
     entry.config = service::resolve_path(entry.config);
+    entry.planner = c.planner;
+    if (r.has("planner")) {
+      config::MapReader own = r.child("planner");
+      read_planner(own, entry.planner);
+      r.absorb(own);
+    }
     for (const auto& other : c.robots) {
       if (other.id == entry.id) {
         r.fail("id", fmt::format("robot '{}' is listed twice", entry.id));
@@ -30,45 +77,17 @@ Result<MotionConfig> load_config(const config::Document& doc) {
   if (robots.empty()) {
     root.fail("robots", "at least one robot is needed");
   }
-  config::MapReader p = root.child("planner", false);
-  auto& lin = c.planner.linear;
-  p.optional("linear_speed_mm_s", lin.max_speed_mm_s);
-  p.optional("linear_accel_mm_s2", lin.max_accel_mm_s2);
-  double angular_speed_deg = lin.max_angular_speed_rad_s * 180 / std::numbers::pi;
-  double angular_accel_deg = lin.max_angular_accel_rad_s2 * 180 / std::numbers::pi;
-  p.optional("angular_speed_deg_s", angular_speed_deg);
-  p.optional("angular_accel_deg_s2", angular_accel_deg);
-  lin.max_angular_speed_rad_s = angular_speed_deg * std::numbers::pi / 180;
-  lin.max_angular_accel_rad_s2 = angular_accel_deg * std::numbers::pi / 180;
-  p.optional("knot_period_s", lin.knot_period_s);
-  p.optional("gripper_dwell_s", c.planner.gripper_dwell_s);
-  p.optional("approach_mm", c.planner.default_approach_mm);
-  p.optional("via_settle_s", c.planner.via_settle_s);
-  auto positive = [&](config::MapReader& r, const char* key, double v) {
-    if (!(v > 0)) {
-      r.fail(key, fmt::format("must be > 0, got {}", v));
-    }
-  };
-  positive(p, "linear_speed_mm_s", lin.max_speed_mm_s);
-  positive(p, "linear_accel_mm_s2", lin.max_accel_mm_s2);
-  positive(p, "angular_speed_deg_s", angular_speed_deg);
-  positive(p, "angular_accel_deg_s2", angular_accel_deg);
-  positive(p, "knot_period_s", lin.knot_period_s);
-  positive(p, "approach_mm", c.planner.default_approach_mm);
-  if (c.planner.gripper_dwell_s < 0) {
-    p.fail("gripper_dwell_s", "must be >= 0");
-  }
-  if (c.planner.via_settle_s < 0) {
-    p.fail("via_settle_s", "must be >= 0");
-  }
-  root.absorb(p);
   root.optional("gateway_timeout_s", c.gateway_timeout_s);
   root.optional("state_timeout_s", c.state_timeout_s);
   root.optional("status_rate_hz", c.status_rate_hz);
   root.optional("keep_finished", c.keep_finished);
-  positive(root, "gateway_timeout_s", c.gateway_timeout_s);
-  positive(root, "state_timeout_s", c.state_timeout_s);
-  positive(root, "status_rate_hz", c.status_rate_hz);
+  for (const auto& [key, v] : {std::pair{"gateway_timeout_s", c.gateway_timeout_s},
+                               std::pair{"state_timeout_s", c.state_timeout_s},
+                               std::pair{"status_rate_hz", c.status_rate_hz}}) {
+    if (!(v > 0)) {
+      root.fail(key, fmt::format("must be > 0, got {}", v));
+    }
+  }
   if (c.keep_finished < 1) {
     root.fail("keep_finished", "must be >= 1");
   }

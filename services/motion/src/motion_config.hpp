@@ -14,7 +14,8 @@ namespace cell::motion_service {
 ///   service: {id: motion}
 ///   robots:                                  # robots this service plans for
 ///     - {id: ibm7545, config: config/robots/ibm7545.yaml}
-///   planner:
+///     - {id: scara_picker, config: ..., planner: {linear_speed_mm_s: 2000}}  # own keys
+///   planner:                                 # every robot's, unless it overrides a key
 ///     linear_speed_mm_s: 250                 # straight-line tool speed
 ///     linear_accel_mm_s2: 1000
 ///     angular_speed_deg_s: 90
@@ -30,6 +31,7 @@ namespace cell::motion_service {
 struct RobotEntry {
   std::string id;
   std::string config;  ///< resolved path
+  motion::PlannerOptions planner;  ///< the service's planner with this robot's overrides
 };
 
 struct MotionConfig {

@@ -111,7 +111,7 @@ MotionService::MotionService(service::Context& ctx, const MotionConfig& config)
                                            entry.id, entry.config, model->id()));
     }
     Robot robot;
-    robot.planner = std::make_unique<motion::Planner>(std::move(*model), config_.planner);
+    robot.planner = std::make_unique<motion::Planner>(std::move(*model), entry.planner);
     robots_.emplace(entry.id, std::move(robot));
   }
 }

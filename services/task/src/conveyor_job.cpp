@@ -11,6 +11,8 @@
 // so the destination moves with the part; at arrival the gripper closes while tracking, then
 // ALTER off, depart, place.
 #include <cmath>
+#include <deque>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <thread>
@@ -70,11 +72,20 @@ class ConveyorJob {
     }
     elapsed_before_ = p["elapsed_s"].get<double>();
     resumed_at_ = Clock::now();
+    if (auto r = stop_if_result(run_.ready_robot()); r) {
+      return *r;
+    }
     if (!p["holding"].is_null()) {
       if (auto r = finish_holding(); r) {
         return *r;
       }
     }
+    // Stage 1 runs on its own: the belt camera exposes at every photocell edge (the encoder
+    // count latched then) and the vision service locates each frame; every frame of the job
+    // is queued here, so a part that passes while the robot is busy is still seen, and still
+    // accounted for (taken, or counted by why not).
+    (void)run_.links().take_frames(spec_.camera);  // frames from before the job: not ours
+    bool ready = false;
     for (;;) {
       if (auto r = stop_if(run_.hold_if_paused()); r) {
         return *r;
@@ -83,48 +94,37 @@ class ConveyorJob {
         break;
       }
       const Belt belt = current_belt();
-      run_.report(fmt::format("waiting for a part on {} ({} picked)", spec_.belt, picked()),
-                  fraction());
-      auto frame = run_.links().locate(
-          spec_.camera, cell_vision_TRIGGER_PHOTOCELL,
-          std::chrono::milliseconds(
-              static_cast<std::int64_t>(run_.config().photocell_timeout_s * 1000)),
-          run_.control());
-      if (auto r = stop_if(interrupt_of(run_.control())); r) {
+      if (!ready) {
+        if (auto r = go_ready(belt); r) {
+          return *r;
+        }
+        ready = true;
+      }
+      pump_eye();
+      if (queue_.empty()) {
+        run_.report(fmt::format("waiting for a part on {} ({} picked)", spec_.belt, picked()),
+                    fraction());
+        if (auto r = stop_if(run_.sleep(0.002)); r) {
+          return *r;
+        }
+        continue;
+      }
+      const Queued next = std::move(queue_.front());
+      queue_.pop_front();
+      moved_ = false;
+      if (auto r = take(next.part, next.frame, belt); r) {
         return *r;
       }
-      if (!frame) {
-        if (finished()) {
-          break;
-        }
-        // No part came (or the camera is not answering): keep waiting while the job runs.
-        log::info("job", "no frame from the belt camera", {{"job", run_.job_id()},
-                                                           {"why", frame.error().message}});
-        continue;
+      ready = !moved_;
+    }
+    // Parts seen but not tried before the job's end: counted, so the causes add up.
+    pump_eye();
+    if (!queue_.empty()) {
+      run_.count("not_tried_job_ended", static_cast<std::uint32_t>(queue_.size()));
+      for (const Queued& q : queue_) {
+        record(q.part, cell_task_PART_PENDING, "the job ended before it was tried");
       }
-      if (!frame->error.empty()) {
-        run_.count("locate_failed");
-        (void)run_.step("frame not processed", {{"error", frame->error}});
-        continue;
-      }
-      if (frame->parts.empty()) {
-        run_.count("locate_failed");
-        (void)run_.step("nothing located", {{"count", frame->belt_count}});
-        continue;
-      }
-      // Downstream first: the part nearest the end of the window has the least time left.
-      std::vector<Located> parts = frame->parts;
-      std::sort(parts.begin(), parts.end(), [&](const Located& a, const Located& b) {
-        return along(belt, a) > along(belt, b);
-      });
-      for (const Located& part : parts) {
-        if (auto r = stop_if(interrupt_of(run_.control())); r) {
-          return *r;
-        }
-        if (auto r = take(part, *frame, belt); r) {
-          return *r;
-        }
-      }
+      queue_.clear();
     }
     p["elapsed_s"] = elapsed();
     if (auto s = run_.step("done"); !s) {
@@ -134,15 +134,139 @@ class ConveyorJob {
   }
 
  private:
-  std::optional<ExecResult> stop_if(Interrupt i) {
-    if (i == Interrupt::kCancel) {
-      return ExecResult::cancelled();
+  struct Queued {
+    Located part;
+    Frame frame;  ///< its frame's exposure, latched count and vision time (parts not copied)
+  };
+
+  double grasp_yaw(const Located& part, double z, int symmetry, const RobotView& now) const {
+    if (symmetry <= 0 || !now.known) {
+      return part.yaw_rad;
     }
-    if (i == Interrupt::kStop) {
-      run_.progress()["elapsed_s"] = elapsed();
-      return ExecResult::stopped();
+    const auto& robot = run_.robot();
+    const Eigen::Index roll = robot.dof() - 1;
+    const auto& spec = robot.joints()[static_cast<std::size_t>(roll)];
+    const double margin = std::numbers::pi / 2;
+    const double step = 2 * std::numbers::pi / symmetry;
+    double best = part.yaw_rad;
+    double best_cost = std::numeric_limits<double>::infinity();
+    for (int k = -symmetry; k <= symmetry; ++k) {
+      const double yaw = part.yaw_rad + step * k;
+      auto q = robot.inverse(task::grasp_pose(robot, part.x_mm, part.y_mm, z, yaw), now.q);
+      if (!q) {
+        continue;
+      }
+      const double r = (*q)[roll];
+      const bool inside = r >= spec.lower + margin && r <= spec.upper - margin;
+      const double cost = std::abs(r - now.q[roll]) + (inside ? 0.0 : 100.0);
+      if (cost < best_cost) {
+        best_cost = cost;
+        best = yaw;
+      }
+    }
+    return best;
+  }
+
+  /// The tracking motion's planned duration (the motion service's preview of `r`).
+  Result<double> preview_duration(cell_motion_MotionRequest r) {
+    const std::string id = std::string(bus::str(r.motion_id)) + "-preview";
+    r.motion_id = bus::borrow(id);
+    r.preview_only = true;
+    auto sent = run_.links().send_motion(r);
+    if (!sent) {
+      return std::move(sent).error();
+    }
+    const auto until = Clock::now() + 1000ms;
+    while (Clock::now() < until) {
+      if (auto u = run_.links().poll_motion(*sent); u) {
+        if (u->state == cell_motion_MOTION_PREVIEW) {
+          return u->duration_s;
+        }
+        if (u->terminal) {
+          return Error{Errc::kOutOfRange, fmt::format("cannot track the part: {}", u->reason)};
+        }
+      }
+      pump_eye();
+      std::this_thread::sleep_for(1ms);
+    }
+    return Error{Errc::kTimeout, "the motion service did not plan the track within 1 s"};
+  }
+
+  /// Takes the belt camera's new frames: each part located goes into the queue (downstream
+  /// first); a frame that could not be processed or showed nothing is a locating failure.
+  void pump_eye() {
+    for (Frame& f : run_.links().take_frames(spec_.camera)) {
+      if (!f.error.empty()) {
+        run_.count("locate_failed");
+        (void)run_.step("frame not processed", {{"error", f.error}});
+        continue;
+      }
+      if (f.parts.empty()) {
+        run_.count("locate_failed");
+        (void)run_.step("nothing located", {{"count", f.belt_count}});
+        continue;
+      }
+      const Belt belt = current_belt();
+      std::vector<Located> parts = std::move(f.parts);
+      f.parts.clear();
+      std::sort(parts.begin(), parts.end(), [&](const Located& a, const Located& b) {
+        return along(belt, a) > along(belt, b);
+      });
+      for (Located& l : parts) {
+        queue_.push_back({std::move(l), f});
+      }
+    }
+  }
+
+  /// The ready pose between picks: above the belt, where parts enter the window (the job's
+  /// `ready_mm`, else halfway between the upstream limit and the point nearest the robot).
+  std::optional<ExecResult> go_ready(const Belt& belt) {
+    Eigen::Vector3d at = belt.nearest + belt.direction * (0.5 * spec_.upstream_mm);
+    if (spec_.ready_mm) {
+      at.x() = spec_.ready_mm->x();
+      at.y() = spec_.ready_mm->y();
+    }
+    const RobotView now = run_.links().robot(run_.robot().id());
+    const double yaw = now.known ? std::atan2(now.base_T_tool.linear()(1, 0),
+                                              now.base_T_tool.linear()(0, 0))
+                                 : 0.0;
+    if (now.known && (now.base_T_tool.translation() -
+                      Eigen::Vector3d(at.x(), at.y(), spec_.travel_z_mm)).norm() < 1.0) {
+      return std::nullopt;  // there already
+    }
+    cell_motion_MotionRequest r{};
+    const std::string id = fresh(run_, "ready", run_.progress()["seq"].get<int>());
+    r.motion_id = bus::borrow(id);
+    r.kind = cell_motion_MOTION_MOVE_POSE;
+    r.target = geometry::pose_to_idl(
+        task::grasp_pose(run_.robot(), at.x(), at.y(), spec_.travel_z_mm, yaw));
+    r.speed_scale = spec_.speed_scale;
+    auto o = run_.move(r, "to the ready pose");
+    if (!o) {
+      return ExecResult::failed(o.error().message);
+    }
+    if (auto i = stop_if(o->interrupted); i) {
+      return i;
+    }
+    if (o->robot_fault) {
+      if (run_.pause_for_robot(o->reason) != Interrupt::kNone) {
+        return stop_if(interrupt_of(run_.control()));
+      }
+      return std::nullopt;
+    }
+    if (!o->ok()) {
+      return ExecResult::failed(fmt::format("ready pose: {}", o->reason));
     }
     return std::nullopt;
+  }
+
+  std::optional<ExecResult> stop_if(Interrupt i) { return stop_if_result(interrupted_result(i)); }
+  /// A stop keeps the elapsed time for the resumed job.
+  std::optional<ExecResult> stop_if_result(std::optional<ExecResult> r) {
+    if (r && r->kind == ExecResult::Kind::kStopped) {
+      run_.progress()["elapsed_s"] = elapsed();
+    }
+    return r;
   }
 
   double elapsed() const {
@@ -213,6 +337,12 @@ class ConveyorJob {
       record(part, cell_task_PART_LOCATE_FAILED, "no pose in the robot frame");
       return std::nullopt;
     }
+    if (!run_.catalogue().find(part.class_name) && !spec_.pick_z_mm) {
+      run_.count("locate_failed");
+      record(part, cell_task_PART_LOCATE_FAILED,
+             fmt::format("not recognised (class '{}'): no grasp height", part.class_name));
+      return std::nullopt;
+    }
     if (part.grip == cell_vision_GRIP_BLOCKED) {
       run_.count("grip_blocked");
       record(part, cell_task_PART_SKIPPED_GRIP_BLOCKED, part.grip_detail);
@@ -229,18 +359,16 @@ class ConveyorJob {
     };
     int symmetry = 1;
     const double z = grasp_z(part.class_name, symmetry);
-    // The robot's tool yaw nearest its current one among the part's symmetric yaws.
+    // Among the part's symmetric yaws, the one whose roll joint is nearest its current value
+    // while staying a quarter turn inside its limits: rolls must not creep toward a limit
+    // pick after pick (a line that meets it would need a joint to jump).
     const RobotView now = run_.links().robot(run_.robot().id());
-    double yaw = part.yaw_rad;
-    if (symmetry > 0 && now.known) {
-      const double tool_yaw = std::atan2(now.base_T_tool.linear()(1, 0),
-                                         now.base_T_tool.linear()(0, 0));
-      const double step = 2 * std::numbers::pi / symmetry;
-      yaw = part.yaw_rad + step * std::round((tool_yaw - part.yaw_rad) / step);
-    }
-    // TRACK toward the part's position at exposure: ALTER carries it from there.
-    const Eigen::Isometry3d at_exposure = task::grasp_pose(run_.robot(), part.x_mm, part.y_mm, z,
-                                                           yaw);
+    const double yaw = grasp_yaw(part, z, symmetry, now);
+    // Where to meet the part: a point downstream of it, reached before the part gets there
+    // (the planned duration, from the motion service's preview, plus a margin). The robot
+    // goes there with ALTER on; the correction, shift(t) - lead, stays 0 until the part
+    // arrives, then follows the belt: continuous from 0, so the arm never jumps, at any belt
+    // speed. lead is the belt travel since exposure at the meeting time.
     const int seq = p["seq"].get<int>() + 1;
     p["seq"] = seq;
     const std::string track_id = fresh(run_, "track", seq);
@@ -249,25 +377,101 @@ class ConveyorJob {
     r.motion_id = bus::borrow(track_id);
     r.robot_id = bus::borrow(robot_id);
     r.kind = cell_motion_MOTION_TRACK;
-    r.target = geometry::pose_to_idl(at_exposure);
     r.speed_scale = spec_.speed_scale;
     r.alter_cumulative = false;
     r.alter_world_frame = true;
+    const Eigen::Vector3d at_exposure(part.x_mm, part.y_mm, z);
+    const auto reading_now = run_.links().belt(spec_.belt);
+    const double travel_now =
+        belt.mm_per_count *
+        static_cast<double>((reading_now ? reading_now->count : frame.belt_count) -
+                            frame.belt_count);
+    const double speed = std::abs(reading_now ? reading_now->speed_mm_per_s : 0.0);
+    // First guess: where the arm already is along the belt (it waits downstream of the camera).
+    double lead_mm = travel_now;
+    if (now.known) {
+      lead_mm = std::max(lead_mm, (now.base_T_tool.translation() - at_exposure).dot(belt.direction));
+    }
+    double planned_s = 0.0;
+    const auto aim = [&] {
+      r.target = geometry::pose_to_idl(task::grasp_pose(
+          run_.robot(), at_exposure.x() + belt.direction.x() * lead_mm,
+          at_exposure.y() + belt.direction.y() * lead_mm, z, yaw));
+    };
+    for (int pass = 0; pass < 5; ++pass) {
+      aim();
+      const auto d = preview_duration(r);
+      if (!d) {
+        // A meeting point the arm cannot reach is outside the window; anything else failed.
+        const bool reach = d.error().code == Errc::kOutOfRange;
+        run_.count(reach ? "outside_window" : "motion_failed");
+        record(part, reach ? cell_task_PART_SKIPPED_OUTSIDE_WINDOW : cell_task_PART_MISSED,
+               d.error().message);
+        return std::nullopt;
+      }
+      planned_s = *d;
+      const double needed_mm =
+          travel_now + speed * (planned_s + kStartLatencyS + kMeetMarginS);
+      if (needed_mm <= lead_mm + 1.0) {
+        break;  // the robot is there before the part
+      }
+      lead_mm = needed_mm;
+    }
+    aim();  // the target is where lead_mm says, whatever pass ended the loop
+    // The downstream limit before the robot moves (the chapter's downstr_lim): the meeting
+    // point and the grip's end (following the part through the dwell) inside the window.
+    {
+      const Eigen::Vector3d meet = Eigen::Vector3d(part.x_mm, part.y_mm, belt.nearest.z()) +
+                                   belt.direction * lead_mm;
+      const double s_meet = (meet - belt.nearest).dot(belt.direction);
+      const double s_end = s_meet + speed * spec_.dwell_s;
+      if (s_end > spec_.downstream_mm || s_meet < spec_.upstream_mm) {
+        run_.count("outside_window");
+        record(part, cell_task_PART_SKIPPED_OUTSIDE_WINDOW,
+               fmt::format("the grasp would be {:.0f} to {:.0f} mm along the belt, outside the "
+                           "window [{:.0f}, {:.0f}] mm",
+                           s_meet, s_end, spec_.upstream_mm, spec_.downstream_mm));
+        (void)run_.step("part skipped");
+        return std::nullopt;
+      }
+    }
+    const Eigen::Vector3d lead = belt.direction * lead_mm;
+    moved_ = true;
+    r.preview_only = false;
     auto sent = run_.links().send_motion(r);
     if (!sent) {
       return ExecResult::failed(sent.error().message);
     }
     run_.report(fmt::format("tracking part ({} picked)", picked()), fraction());
-    // Stage 2: ALTER every cycle until the motion arrives; the downstream limit is checked as
-    // soon as the planned duration is known, before the robot has gone far.
+    // Stage 2: ALTER every cycle until the motion arrives, then through the grip.
     std::uint64_t cycle = 0;
     std::int64_t accepted_ns = 0;  // wall clock when the motion service took the track
-    bool checked = false;
     bool arrived = false;
     std::string trajectory_id;
     auto next = Clock::now();
     const auto give_up = Clock::now() + std::chrono::milliseconds(static_cast<std::int64_t>(
                                             run_.config().motion_timeout_s * 1000));
+    bool part_met = false;  // the part has reached the meeting point: ALTER follows it
+    const auto send_alter = [&] {
+      const RobotView v = run_.links().robot(robot_id);
+      if (!v.trajectory_id.empty()) {
+        trajectory_id = v.trajectory_id;
+      }
+      if (!trajectory_id.empty()) {
+        if (const auto latest = run_.links().belt(spec_.belt); latest) {
+          const Eigen::Vector3d c = shift_at(latest->count) - lead;
+          const bool met = c.dot(belt.direction) > 0.0;
+          part_met = part_met || met;
+          (void)run_.links().alter(robot_id, trajectory_id, ++cycle,
+                                   met ? c : Eigen::Vector3d::Zero(),
+                                   met ? v_belt : Eigen::Vector3d::Zero(), latest->stamp_ns);
+        }
+      }
+      pump_eye();
+      next += std::chrono::duration_cast<Clock::duration>(
+          std::chrono::duration<double>(spec_.alter_period_s));
+      std::this_thread::sleep_until(next);
+    };
     while (!arrived) {
       if (control_interrupted()) {
         stop_robot();
@@ -281,25 +485,6 @@ class ConveyorJob {
         if (accepted_ns == 0 && u->state != cell_motion_MOTION_REFUSED) {
           accepted_ns = wall_time_ns();
         }
-        if (!checked && u->duration_s > 0) {
-          checked = true;
-          const auto reading_now = run_.links().belt(spec_.belt);
-          const double travel_left_s = u->duration_s;
-          const std::int64_t count_now = reading_now ? reading_now->count : frame.belt_count;
-          const Eigen::Vector3d final_pos = Eigen::Vector3d(part.x_mm, part.y_mm, belt.nearest.z()) +
-                                            shift_at(count_now) + v_belt * travel_left_s;
-          const double s = (final_pos - belt.nearest).dot(belt.direction);
-          if (s > spec_.downstream_mm || s < spec_.upstream_mm) {
-            stop_robot();
-            run_.count("outside_window");
-            record(part, cell_task_PART_SKIPPED_OUTSIDE_WINDOW,
-                   fmt::format("the grasp would be {:.0f} mm along the belt, outside the window "
-                               "[{:.0f}, {:.0f}] mm",
-                               s, spec_.upstream_mm, spec_.downstream_mm));
-            (void)wait_terminal(*sent);
-            return recover_after_stop();
-          }
-        }
         if (u->terminal) {
           if (u->state != cell_motion_MOTION_DONE) {
             run_.count("motion_failed");
@@ -309,33 +494,54 @@ class ConveyorJob {
           arrived = true;
         }
       }
-      const RobotView v = run_.links().robot(robot_id);
-      if (!v.trajectory_id.empty()) {
-        trajectory_id = v.trajectory_id;
-      }
-      if (!trajectory_id.empty()) {
-        const auto reading_now = run_.links().belt(spec_.belt);
-        if (reading_now) {
-          (void)run_.links().alter(robot_id, trajectory_id, ++cycle, shift_at(reading_now->count),
-                                   v_belt);
-        }
-      }
-      next += std::chrono::duration_cast<Clock::duration>(
-          std::chrono::duration<double>(spec_.alter_period_s));
-      std::this_thread::sleep_until(next);
+      send_alter();
     }
-    // At the part, still tracking: close the gripper, keep tracking through the dwell.
-    (void)run_.links().command(robot_id, cell_robot_CMD_GRIPPER_CLOSE, 2000ms);
+    // At the meeting point: wait for the part (ALTER then follows it), close the gripper,
+    // keep tracking through the dwell.
+    const auto meet_deadline = Clock::now() + std::chrono::duration<double>(
+                                                  1.0 + 2.0 * kMeetMarginS +
+                                                  (speed > 1.0 ? 200.0 / speed : 0.0));
+    while (!part_met && Clock::now() < meet_deadline) {
+      if (control_interrupted()) {
+        stop_robot();
+        return stop_if(interrupt_of(run_.control()));
+      }
+      send_alter();
+    }
+    send_alter();  // one correction past the meeting point, so the arm moves with the part
+    if (const auto latest = run_.links().belt(spec_.belt); latest) {
+      const RobotView v = run_.links().robot(robot_id);
+      const Eigen::Vector3d part_now = at_exposure + shift_at(latest->count);
+      log::debug("job", "gripping", {{"job", run_.job_id()},
+                                     {"tool_minus_part_mm",
+                                      fmt::format("{:.2f},{:.2f}",
+                                                  v.base_T_tool.translation().x() - part_now.x(),
+                                                  v.base_T_tool.translation().y() - part_now.y())},
+                                     {"met", part_met ? "yes" : "no"},
+                                     {"tracking", v.tracking ? "yes" : "no"}});
+    }
+    if (auto closed = run_.links().command(robot_id, cell_robot_CMD_GRIPPER_CLOSE, 2000ms);
+        !closed) {
+      run_.count("motion_failed");
+      record(part, cell_task_PART_MISSED, closed.error().message);
+      return recover_after_stop();
+    }
     const auto grip_end = Clock::now() + std::chrono::duration<double>(spec_.dwell_s);
     while (Clock::now() < grip_end) {
-      const auto reading_now = run_.links().belt(spec_.belt);
-      if (reading_now && !trajectory_id.empty()) {
-        (void)run_.links().alter(robot_id, trajectory_id, ++cycle, shift_at(reading_now->count),
-                                 v_belt);
-      }
-      std::this_thread::sleep_for(std::chrono::duration<double>(spec_.alter_period_s));
+      send_alter();
     }
     (void)run_.links().command(robot_id, cell_robot_CMD_ALTER_OFF, 2000ms);
+    // The depart starts where ALTER left the arm: wait for it to rest there (a state taken
+    // while it still followed the belt would be refused by the gateway).
+    (void)run_.links().wait_robot(
+        robot_id, [](const RobotView& v) { return !v.moving && !v.tracking; }, 500ms,
+        run_.control());
+    if (const RobotView held = run_.links().robot(robot_id);
+        held.gripper != cell_robot_GRIPPER_CLOSED) {
+      run_.count("motion_failed");
+      record(part, cell_task_PART_MISSED, "the gripper did not close");
+      return recover_after_stop();
+    }
     // Held from here: journal the intent to place, then depart and place.
     const task::Slot& slot =
         spec_.place.slots[static_cast<std::size_t>(p["slot"].get<int>()) % spec_.place.slots.size()];
@@ -500,6 +706,12 @@ class ConveyorJob {
   double plane_z_ = 0.0;
   double elapsed_before_ = 0.0;
   Clock::time_point resumed_at_;
+  std::deque<Queued> queue_;
+  bool moved_ = false;  ///< a part was tracked since the robot was last at its ready pose
+  /// From the preview to the arm moving (the real request, planning, the gateway's start).
+  static constexpr double kStartLatencyS = 0.02;
+  /// The robot is at the meeting point this long before the part.
+  static constexpr double kMeetMarginS = 0.03;
 };
 
 }  // namespace

@@ -156,7 +156,89 @@ Result<MotionOutcome> JobRun::move(cell_motion_MotionRequest& request,
   report(step_text, fraction_);
   const auto timeout = std::chrono::milliseconds(
       static_cast<std::int64_t>(config_.motion_timeout_s * 1000.0));
-  return links_.move(request, control_, timeout, {});
+  // Refused as busy: a motion this service sent before it was restarted still runs (or was
+  // just accepted). Wait for the robot to finish it, then send again.
+  for (int attempt = 0;; ++attempt) {
+    auto o = links_.move(request, control_, timeout, {});
+    if (!o || o->state != cell_motion_MOTION_REFUSED ||
+        o->reason.find("is busy with motion") == std::string::npos || attempt == 5) {
+      return o;
+    }
+    log::info("job", "robot busy with an earlier motion: waiting for it",
+              {{"job", job_id_}, {"why", o->reason}});
+    std::this_thread::sleep_for(200ms);
+    (void)links_.wait_robot(robot_id, [](const RobotView& v) { return !v.moving; }, timeout,
+                            control_);
+    if (control_.interrupted()) {
+      return o;
+    }
+  }
 }
+
+std::optional<ExecResult> interrupted_result(Interrupt i) {
+  if (i == Interrupt::kCancel) {
+    return ExecResult::cancelled();
+  }
+  if (i == Interrupt::kStop) {
+    return ExecResult::stopped();
+  }
+  return std::nullopt;
+}
+
+/// A motion the task service sent before it restarted may still run: wait for the robot to
+/// rest (and to be out of a fault) before anything new is sent.
+std::optional<ExecResult> JobRun::ready_robot() {
+  for (;;) {
+    const bool idle = links_.wait_robot(
+        robot_.id(),
+        [](const RobotView& v) {
+          return !v.moving && v.mode == cell_robot_MODE_IDLE && v.homed;
+        },
+        std::chrono::milliseconds(
+            static_cast<std::int64_t>(config_.robot_state_timeout_s * 1000)),
+        control_);
+    if (auto r = interrupted_result(interrupt_of(control_)); r) {
+      return r;
+    }
+    if (idle) {
+      return std::nullopt;
+    }
+    const RobotView v = links_.robot(robot_.id());
+    if (!v.known) {
+      return ExecResult::failed(fmt::format("no state from robot '{}' within {} s",
+                                            robot_.id(),
+                                            config_.robot_state_timeout_s));
+    }
+    if (v.mode == cell_robot_MODE_FAULT || v.mode == cell_robot_MODE_STOPPED) {
+      if (auto r = interrupted_result(pause_for_robot(v.fault_text.empty() ? "stopped"
+                                                                          : v.fault_text));
+          r) {
+        return r;
+      }
+    } else if (!v.homed && !v.moving && v.mode != cell_robot_MODE_HOMING) {
+      // The thesis's first menu entry, done by the job: find home, then go on.
+      report("homing the robot", 0.0);
+      if (auto s = links_.command(robot_.id(), cell_robot_CMD_HOME, 5000ms); !s) {
+        return ExecResult::failed(fmt::format("robot '{}' is not homed and homing failed: {}",
+                                              robot_.id(), s.error().message));
+      }
+      const bool homed = links_.wait_robot(
+          robot_.id(),
+          [](const RobotView& r) { return r.homed && r.mode == cell_robot_MODE_IDLE; }, 180s,
+          control_);
+      if (auto r = interrupted_result(interrupt_of(control_)); r) {
+        return r;
+      }
+      if (!homed) {
+        return ExecResult::failed(fmt::format("robot '{}' did not finish homing in 180 s",
+                                              robot_.id()));
+      }
+      if (auto s = step("homed"); !s) {
+        return ExecResult::failed(s.error().message);
+      }
+    }
+  }
+}
+
 
 }  // namespace cell::task_service

@@ -3,6 +3,7 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -108,6 +109,11 @@ class JobRun {
   /// outcome says robot_fault, the executor redoes its step); progress is reported.
   Result<MotionOutcome> move(cell_motion_MotionRequest& request, const std::string& step_text);
 
+  /// Before the job's first motion (and after a fault): waits for the robot to rest (a motion
+  /// sent before a restart may still run), pauses while it is in a fault or stopped, and homes
+  /// it if it is not homed (the thesis's first menu entry, done by the job). nullopt: ready.
+  std::optional<ExecResult> ready_robot();
+
  private:
   std::string job_id_;
   const task::JobSpec& spec_;
@@ -125,6 +131,9 @@ class JobRun {
   bool paused_ = false;
   std::string pause_reason_;
 };
+
+/// Cancel and stop as the executor's result; nullopt for none.
+std::optional<ExecResult> interrupted_result(Interrupt i);
 
 /// The executors (table_job.cpp, conveyor_job.cpp).
 ExecResult run_table_job(JobRun& run);

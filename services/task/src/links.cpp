@@ -103,6 +103,7 @@ void Links::take_states() {
       v.gripper = s->gripper;
       v.homed = s->homed;
       v.moving = s->moving;
+      v.tracking = s->tracking;
       v.trajectory_id = std::string(bus::str(s->trajectory_id));
       v.fault_text = std::string(bus::str(s->fault_text));
       v.received = Clock::now();
@@ -247,6 +248,44 @@ std::optional<MotionOutcome> Links::motion_status(const std::string& motion_id,
   }
 }
 
+Frame to_frame(const cell_vision_Detections& d) {
+  Frame f;
+  f.exposure_ns = d.header.stamp_ns;
+  f.belt_count = d.belt_count;
+  f.error = std::string(bus::str(d.error));
+  f.calibration = std::string(bus::str(d.calibration));
+  f.processing_ms = d.processing_ms;
+  f.received = Clock::now();
+  for (const auto& item : bus::span(d.items)) {
+    Located l;
+    l.class_name = std::string(bus::str(item.class_name));
+    l.x_mm = item.base_pose.x_mm;
+    l.y_mm = item.base_pose.y_mm;
+    l.yaw_rad = item.base_pose.rz_rad;
+    l.has_pose = item.has_base_pose;
+    l.quality = item.quality;
+    l.grip = item.grip;
+    l.grip_style = item.grip_style;
+    l.grip_detail = std::string(bus::str(item.grip_detail));
+    l.touching = item.touching;
+    f.parts.push_back(std::move(l));
+  }
+  return f;
+}
+
+std::vector<Frame> Links::take_frames(const std::string& camera_id) {
+  std::vector<Frame> out;
+  auto batch = images_.replies().take_copies(16);
+  if (batch) {
+    for (const auto& d : *batch) {
+      if (bus::str(d->camera_id) == camera_id) {
+        out.push_back(to_frame(*d));
+      }
+    }
+  }
+  return out;
+}
+
 Result<Frame> Links::locate(const std::string& camera_id, cell_vision_TriggerKind trigger,
                             std::chrono::milliseconds timeout, const Control& control) {
   cell_vision_ImageRequest request{};
@@ -266,28 +305,7 @@ Result<Frame> Links::locate(const std::string& camera_id, cell_vision_TriggerKin
         if (!bus::same_request(d->request_id, images_.client_id(), *seq)) {
           continue;
         }
-        Frame f;
-        f.exposure_ns = d->header.stamp_ns;
-        f.belt_count = d->belt_count;
-        f.error = std::string(bus::str(d->error));
-        f.calibration = std::string(bus::str(d->calibration));
-        f.processing_ms = d->processing_ms;
-        f.received = Clock::now();
-        for (const auto& item : bus::span(d->items)) {
-          Located l;
-          l.class_name = std::string(bus::str(item.class_name));
-          l.x_mm = item.base_pose.x_mm;
-          l.y_mm = item.base_pose.y_mm;
-          l.yaw_rad = item.base_pose.rz_rad;
-          l.has_pose = item.has_base_pose;
-          l.quality = item.quality;
-          l.grip = item.grip;
-          l.grip_style = item.grip_style;
-          l.grip_detail = std::string(bus::str(item.grip_detail));
-          l.touching = item.touching;
-          f.parts.push_back(std::move(l));
-        }
-        return f;
+        return to_frame(*d);
       }
     }
     take_states();
@@ -329,10 +347,10 @@ std::optional<BeltReading> Links::belt(const std::string& belt_id) {
 
 Status Links::alter(const std::string& robot_id, const std::string& trajectory_id,
                     std::uint64_t cycle, const Eigen::Vector3d& translation_mm,
-                    const Eigen::Vector3d& velocity_mm_per_s) {
+                    const Eigen::Vector3d& velocity_mm_per_s, std::int64_t stamp_ns) {
   cell_motion_AlterCorrection c{};
   c.robot_id = bus::borrow(robot_id);
-  c.header.stamp_ns = wall_time_ns();
+  c.header.stamp_ns = stamp_ns > 0 ? stamp_ns : wall_time_ns();
   c.trajectory_id = bus::borrow(trajectory_id);
   c.cycle = cycle;
   c.translation_mm = {translation_mm.x(), translation_mm.y(), translation_mm.z()};
@@ -346,6 +364,11 @@ Status Links::command(const std::string& robot_id, cell_robot_RobotCommandKind k
   cell_robot_RobotCommand c{};
   c.robot_id = bus::borrow(robot_id);
   c.kind = kind;
+  return command(c, timeout);
+}
+
+Status Links::command(cell_robot_RobotCommand& c, std::chrono::milliseconds timeout) {
+  const std::string robot_id(bus::str(c.robot_id));
   auto reply = commands_.call(c, timeout);
   if (!reply) {
     return Error{Errc::kProtocol,

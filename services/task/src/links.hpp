@@ -48,6 +48,7 @@ struct RobotView {
   cell_robot_GripperState gripper = cell_robot_GRIPPER_UNKNOWN;
   bool homed = false;
   bool moving = false;
+  bool tracking = false;  ///< arrived, following ALTER corrections (a belt)
   std::string trajectory_id;
   std::string fault_text;
   Clock::time_point received{};
@@ -87,6 +88,9 @@ struct Frame {
   double processing_ms = 0.0;
   Clock::time_point received{};
 };
+
+/// A Detections sample as a Frame (parts in the robot's base frame).
+Frame to_frame(const cell_vision_Detections& d);
 
 /// The newest encoder reading of a belt.
 struct BeltReading {
@@ -137,6 +141,10 @@ class Links {
   bool wait_robot(const std::string& robot_id, const std::function<bool(const RobotView&)>& pred,
                   std::chrono::milliseconds timeout, const Control& control);
 
+  /// Every Detections of `camera_id` that arrived since the last call, whichever request (or
+  /// none: a photocell-triggered camera's own frames) it answered. Non-blocking.
+  std::vector<Frame> take_frames(const std::string& camera_id);
+
   /// Asks `camera_id` for one frame (now, or at the next photocell edge) and waits for the
   /// vision service's detections of exactly that frame. Errors: kProtocol naming what did not
   /// answer (no camera on the bus, no detections within `timeout`); interrupts: kNotReady.
@@ -158,14 +166,17 @@ class Links {
   std::optional<BeltReading> belt(const std::string& belt_id);
 
   /// Writes an ALTER correction (world/base frame translation and its rate) for the robot's
-  /// running trajectory.
+  /// running trajectory, valid at `stamp_ns` (wall clock; 0: now): the gateway extrapolates
+  /// it with its rate from then, so the age of a belt reading does not make the arm lag.
   Status alter(const std::string& robot_id, const std::string& trajectory_id,
                std::uint64_t cycle, const Eigen::Vector3d& translation_mm,
-               const Eigen::Vector3d& velocity_mm_per_s);
+               const Eigen::Vector3d& velocity_mm_per_s, std::int64_t stamp_ns = 0);
 
   /// Sends a robot command (gripper, alter-off, stop) and waits for the gateway's answer.
   Status command(const std::string& robot_id, cell_robot_RobotCommandKind kind,
                  std::chrono::milliseconds timeout);
+  /// The same for a command with its parameters filled in (lights, gripper width, ...).
+  Status command(cell_robot_RobotCommand& command, std::chrono::milliseconds timeout);
 
   const std::string& client_id() const noexcept { return motions_.client_id(); }
 

@@ -127,7 +127,7 @@ class TableJob {
       p["holding"] = nullptr;
       p["attempts"] = json::object();
     }
-    if (auto r = settle_robot(); r) {
+    if (auto r = run_.ready_robot(); r) {
       return *r;
     }
     if (auto r = resolve_holding(); r) {
@@ -158,15 +158,7 @@ class TableJob {
   }
 
  private:
-  std::optional<ExecResult> interrupted(Interrupt i) {
-    if (i == Interrupt::kCancel) {
-      return ExecResult::cancelled();
-    }
-    if (i == Interrupt::kStop) {
-      return ExecResult::stopped();
-    }
-    return std::nullopt;
-  }
+  static std::optional<ExecResult> interrupted(Interrupt i) { return interrupted_result(i); }
 
   std::optional<ExecResult> journal(const std::string& name, const json& detail = json::object()) {
     if (auto s = run_.step(name, detail); !s) {
@@ -175,57 +167,21 @@ class TableJob {
     return std::nullopt;
   }
 
-  /// A motion the task service sent before it restarted may still run: wait for the robot to
-  /// rest (and to be out of a fault) before anything new is sent.
-  std::optional<ExecResult> settle_robot() {
-    for (;;) {
-      const bool idle = run_.links().wait_robot(
-          run_.robot().id(),
-          [](const RobotView& v) { return !v.moving && v.mode == cell_robot_MODE_IDLE; },
-          std::chrono::milliseconds(
-              static_cast<std::int64_t>(run_.config().robot_state_timeout_s * 1000)),
-          run_.control());
-      if (auto r = interrupted(interrupt_of(run_.control())); r) {
-        return r;
-      }
-      if (idle) {
-        return std::nullopt;
-      }
-      const RobotView v = run_.links().robot(run_.robot().id());
-      if (!v.known) {
-        return ExecResult::failed(fmt::format("no state from robot '{}' within {} s",
-                                              run_.robot().id(),
-                                              run_.config().robot_state_timeout_s));
-      }
-      if (v.mode == cell_robot_MODE_FAULT || v.mode == cell_robot_MODE_STOPPED) {
-        if (auto r = interrupted(run_.pause_for_robot(v.fault_text.empty() ? "stopped"
-                                                                            : v.fault_text));
-            r) {
-          return r;
-        }
-      } else if (!v.homed && v.mode != cell_robot_MODE_HOMING) {
-        // The thesis's first menu entry, done by the job: find home, then go on.
-        run_.report("homing the robot", 0.0);
-        if (auto s = run_.links().command(run_.robot().id(), cell_robot_CMD_HOME, 5000ms); !s) {
-          return ExecResult::failed(fmt::format("robot '{}' is not homed and homing failed: {}",
-                                                run_.robot().id(), s.error().message));
-        }
-        const bool homed = run_.links().wait_robot(
-            run_.robot().id(),
-            [](const RobotView& r) { return r.homed && r.mode == cell_robot_MODE_IDLE; }, 180s,
-            run_.control());
-        if (auto r = interrupted(interrupt_of(run_.control())); r) {
-          return r;
-        }
-        if (!homed) {
-          return ExecResult::failed(fmt::format("robot '{}' did not finish homing in 180 s",
-                                                run_.robot().id()));
-        }
-        if (auto r = journal("homed"); r) {
-          return r;
-        }
-      }
+  /// The job's lights before a grab (the thesis switched its lamps on from the program).
+  std::optional<ExecResult> switch_lights() {
+    using Lights = task::TablePickPlaceSpec::Lights;
+    if (spec_.lights == Lights::kKeep) {
+      return std::nullopt;
     }
+    cell_robot_RobotCommand c{};
+    c.robot_id = bus::borrow(run_.robot().id());
+    c.kind = cell_robot_CMD_LIGHTS;
+    c.halogen_on = spec_.lights == Lights::kHalogen || spec_.lights == Lights::kBoth;
+    c.fluorescent_on = spec_.lights == Lights::kFluorescent || spec_.lights == Lights::kBoth;
+    if (auto s = run_.links().command(c, 5000ms); !s) {
+      return ExecResult::failed(fmt::format("lights: {}", s.error().message));
+    }
+    return std::nullopt;
   }
 
   /// Sends a motion; robot faults pause the job and return kRetry via `retry`.
@@ -246,7 +202,7 @@ class TableJob {
       if (auto i = interrupted(run_.pause_for_robot(o->reason)); i) {
         return i;
       }
-      if (auto r2 = settle_robot(); r2) {
+      if (auto r2 = run_.ready_robot(); r2) {
         return r2;
       }
       retry = true;
@@ -282,6 +238,9 @@ class TableJob {
         return ExecResult::failed(fmt::format("image window {}: {}", w + 1, o.reason));
       }
       break;
+    }
+    if (auto r = switch_lights(); r) {
+      return r;
     }
     if (auto r = interrupted(run_.sleep(spec_.settle_s)); r) {
       return r;

@@ -64,6 +64,10 @@ struct TablePickPlaceSpec {
   int max_retries = 2;               ///< extra attempts for a missed grasp (re-locate first)
   bool return_home = true;
   double speed_scale = 1.0;
+  /// The cell's lights for the grabs (the thesis's halogen lamp and fluorescent tubes), switched
+  /// through the robot's gateway before the first window; `keep` leaves them as they are.
+  enum class Lights : std::uint8_t { kKeep, kOff, kFluorescent, kHalogen, kBoth };
+  Lights lights = Lights::kFluorescent;
   PlacePattern place;
 };
 
@@ -85,6 +89,9 @@ struct ConveyorPickSpec {
   std::optional<double> place_z_mm;
   double dwell_s = 0.1;             ///< gripper closing time while tracking
   double alter_period_s = 0.004;    ///< ALTER cycle (the chapter's 16 ms; aim 1-4 ms)
+  /// Where the tool waits between picks, x-y in the robot's base frame at travel_z_mm
+  /// (default: above the belt, halfway from the point nearest the robot to the upstream limit).
+  std::optional<Eigen::Vector2d> ready_mm;
   double speed_scale = 1.0;
   PlacePattern place;  ///< a bin: one slot, or several (filled cyclically)
 };

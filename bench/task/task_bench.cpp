@@ -1,0 +1,202 @@
+// task_bench: the task service on the simulated cell (bench/README.md, section task).
+//  - submission -> acceptance: a JobRequest written on the bus until its JobStatus (validated,
+//    journaled with fsync, answered), for valid conveyor jobs (cancelled at once);
+//  - the table job: 15 ICs of the thesis's table, picks per minute;
+//  - the belt at 0.5 m/s: picks per minute at a part every 2 s and every 1.2 s, and the time
+//    from the exposure to the tracking motion under way (the chapter's major cycle: 16 ms);
+//  - the belt at 2 m/s, the same (the issue asks 95% picked there: measured, not asserted).
+// Calibrations are the simulator's truth (the subject is the task service). Run:
+//   build/bin/task_bench            (about 5 minutes)      build/bin/task_bench --quick
+#include <sqlite3.h>
+
+#include <algorithm>
+#include <cstring>
+#include <numeric>
+
+#include "cell/bus/request_reply.hpp"
+#include "cell/bus/topics.hpp"
+#include "cell/common/time.hpp"
+#include "task_cell_fixture.hpp"
+
+namespace cell::task_test {
+namespace {
+
+bool g_quick = false;
+
+struct Stats {
+  std::vector<double> v;
+  double q(double p) const {
+    if (v.empty()) {
+      return 0.0;
+    }
+    std::vector<double> s = v;
+    std::sort(s.begin(), s.end());
+    return s[static_cast<std::size_t>(p * static_cast<double>(s.size() - 1))];
+  }
+};
+
+/// exposure_to_track_ms of every "gripped" step of `job` in the journal.
+Stats exposure_to_track(const std::string& journal, const std::string& job) {
+  Stats out;
+  sqlite3* db = nullptr;
+  if (sqlite3_open_v2(journal.c_str(), &db, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK) {
+    sqlite3_close(db);
+    return out;
+  }
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db, "SELECT detail_json FROM steps WHERE job_id = ? AND name = 'gripped'",
+                         -1, &st, nullptr) == SQLITE_OK) {
+    sqlite3_bind_text(st, 1, job.c_str(), -1, SQLITE_TRANSIENT);
+    while (sqlite3_step(st) == SQLITE_ROW) {
+      const auto* text = reinterpret_cast<const char*>(sqlite3_column_text(st, 0));
+      const json d = json::parse(text != nullptr ? text : "{}", nullptr, false);
+      if (d.is_object() && d.value("exposure_to_track_ms", -1.0) > 0) {
+        out.v.push_back(d["exposure_to_track_ms"].get<double>());
+      }
+    }
+  }
+  sqlite3_finalize(st);
+  sqlite3_close(db);
+  return out;
+}
+
+class TaskBench : public TaskCellTest {
+ protected:
+  struct BeltRun {
+    double speed = 0, period = 0;
+    int in_bin = 0, fell_off = 0, picked = 0;
+    json counters;
+    double elapsed_s = 0;
+    Stats latency;
+  };
+
+  BeltRun belt_run(const std::string& id, double speed, double period, double duration_s,
+                   const std::string& job_file) {
+    BeltRun r;
+    r.speed = speed;
+    r.period = period;
+    const std::string scene = write(id + ".yaml", belt_scene(speed, period));
+    std::ifstream f(job_file);
+    std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    const auto at = text.find("duration_s: 60");
+    if (at != std::string::npos) {
+      text.replace(at, 14, fmt::format("duration_s: {}", duration_s));
+    }
+    const std::string job = write(id + "-job.yaml", text);
+    (void)cellctl({"world", "reset", "--scene", scene});
+    (void)cellctl({"submit", job, "--id", id, "--wait"}, 600s);
+    (void)cellctl({"world", "belt", "--id", "belt1", "--speed", "0"});
+    const json status = this->job(id);
+    r.counters = status.value("counters", json::object());
+    r.picked = r.counters.value("picked", 0);
+    r.elapsed_s = status.value("elapsed_s", 0.0);
+    for (const json& p : world_parts()) {
+      const double x = p["pose"]["x_mm"].get<double>() - kPickerBaseX;
+      const double y = p["pose"]["y_mm"].get<double>();
+      const bool floor = p["support"] == "floor";
+      if (floor && (std::hypot(x - 100.0, y + 300.0) < 60.0 || std::hypot(x - 100.0, y + 250.0) < 60.0)) {
+        ++r.in_bin;
+      } else if (floor) {
+        ++r.fell_off;
+      }
+    }
+    r.latency = exposure_to_track(dir_ + "/journal.sqlite", id);
+    return r;
+  }
+};
+
+TEST_F(TaskBench, Table) {
+  start_cell("config/scenes/table_ics.yaml");
+  ASSERT_FALSE(HasFailure());
+  (void)child("calibration")->stop(10s);
+  store_truth_calibration("ibm7545_eye", "", Eigen::Isometry3d::Identity(), -231.51);
+  store_truth_calibration("belt_cam", "scara_picker",
+                          Eigen::Isometry3d(Eigen::Translation3d(kPickerBaseX, 0, kPickerBaseZ)),
+                          -200.0);
+  start("calibration2", "cell-calibration", dir_ + "/calibration.yaml");
+  ASSERT_EQ(cellctl({"robot", "home", "--robot", "scara_picker"}, 30s).exit.code, 0);
+
+  // Submission -> acceptance, through the bus as a remote client does.
+  Stats accept;
+  {
+    bus::Participant participant(domain_, partition_);
+    bus::Requester<cell_task_JobRequest, cell_task_JobStatus> requester(
+        participant, bus::topics::kJobRequest, bus::topics::kJobStatus,
+        bus::make_client_id("task_bench"));
+    std::ifstream f(cell::testing::source_dir() + "/config/jobs/conveyor_ics.yaml");
+    const std::string spec((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    const int n = g_quick ? 5 : 40;
+    for (int i = 0; i < n; ++i) {
+      const std::string id = fmt::format("accept-{}", i);
+      cell_task_JobRequest r{};
+      r.job_id = bus::borrow(id);
+      r.kind = cell_task_JOB_CONVEYOR_PICK;
+      const std::string robot = "scara_picker";
+      r.robot_id = bus::borrow(robot);
+      r.spec_yaml = bus::borrow(spec);
+      const auto t0 = std::chrono::steady_clock::now();
+      auto reply = requester.call(r, 5s);
+      const auto t1 = std::chrono::steady_clock::now();
+      if (reply && reply->get().state != cell_task_JOB_REJECTED && i > 0) {  // 0: discovery
+        accept.v.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+      }
+      (void)cellctl({"cancel", id});
+    }
+  }
+
+  // The table job.
+  (void)cellctl({"world", "reset"});
+  const auto t0 = std::chrono::steady_clock::now();
+  (void)cellctl({"submit", cell::testing::source_dir() + "/config/jobs/table_ics.yaml", "--id",
+                 "table", "--wait"},
+                600s);
+  const double table_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const json table = job("table");
+  const int table_parts = table.value("parts_done", 0);
+
+  // The belt.
+  const std::string conveyor = cell::testing::source_dir() + "/config/jobs/conveyor_ics.yaml";
+  const double d = g_quick ? 10.0 : 60.0;
+  std::vector<BeltRun> runs;
+  runs.push_back(belt_run("belt-05-2", 500, 2.0, d, conveyor));
+  if (!g_quick) {
+    runs.push_back(belt_run("belt-05-12", 500, 1.2, d, conveyor));
+    runs.push_back(belt_run("belt-20-2", 2000, 2.0, d, conveyor));
+  }
+
+  std::printf("\ntask_bench: the task service on the simulated cell (ideal gateways, truth "
+              "calibrations)\n\n");
+  std::printf("| measure | value | peer |\n|---|---|---|\n");
+  std::printf("| submission -> acceptance (JobRequest -> JobStatus, validated + journaled), "
+              "median / p90 / max [ms] | %.2f / %.2f / %.2f (n = %zu) | - |\n",
+              accept.q(0.5), accept.q(0.9), accept.q(1.0), accept.v.size());
+  std::printf("| table job (the thesis's 15 ICs, 7545) | %d parts in %.1f s: %.1f picks/min | "
+              "the thesis gives no cycle time (digest 000 §8) |\n",
+              table_parts, table_s, table_parts * 60.0 / std::max(1.0, table_s));
+  for (const BeltRun& r : runs) {
+    std::printf("| belt %.1f m/s, a part every %.1f s, %.0f s | %d picked by truth of %d "
+                "(%.1f%%), %.1f picks/min; job counters %s | - |\n",
+                r.speed / 1000, r.period, d, r.in_bin, r.in_bin + r.fell_off,
+                100.0 * r.in_bin / std::max(1, r.in_bin + r.fell_off),
+                r.in_bin * 60.0 / std::max(1.0, r.elapsed_s), r.counters.dump().c_str());
+    std::printf("| belt %.1f m/s: exposure -> tracking motion under way, median / p90 / max "
+                "[ms] | %.1f / %.1f / %.1f (n = %zu) | the chapter's major cycle 16 ms |\n",
+                r.speed / 1000, r.latency.q(0.5), r.latency.q(0.9), r.latency.q(1.0),
+                r.latency.v.size());
+  }
+  std::printf("task_bench: done\n");
+}
+
+}  // namespace
+}  // namespace cell::task_test
+
+int main(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--quick") == 0) {
+      cell::task_test::g_quick = true;
+    }
+  }
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}

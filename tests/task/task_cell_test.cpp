@@ -1,0 +1,177 @@
+// The task service end to end (issue 9's "must hold"), on the simulated cell: real processes on
+// a private DDS domain and partition, driven with cellctl as an operator would, every result
+// checked against cell-sim-world's ground truth.
+//  - Table: 15 ICs scattered by the simulator in the camera window, the 7545's camera
+//    calibrated from scratch by cell-calibration (board images, then the guided hand-eye), the
+//    thesis's job submitted: every IC in its slot within 0.5 mm and 1 degree.
+//  - Conveyor: a stream of DIPs on belt1 at 0.5 m/s for 60 s.
+//  - Faults: cell-task killed (SIGKILL) 20 times during a table job; bad requests refused.
+#include <csignal>
+#include <random>
+#include <set>
+#include <thread>
+
+#include <gmock/gmock.h>
+
+#include "task_cell_fixture.hpp"
+
+namespace cell::task_test {
+namespace {
+
+using ::testing::HasSubstr;
+
+TEST_F(TaskCellTest, TableJobFromScratchPutsEveryScatteredIcInItsSlot) {
+  const std::string scene = write("scene.yaml", kTableScene);
+  start_cell(scene);
+  ASSERT_FALSE(HasFailure());
+  calibrate_7545_camera_from_scratch();
+  ASSERT_FALSE(HasFailure()) << logs();
+  // The guided procedure reset the world to its board scene and back: scatter the ICs now.
+  ASSERT_EQ(cellctl({"world", "reset", "--scene", scene}).exit.code, 0);
+  ToolRun r = cellctl({"world", "scatter", "--count", "15", "--seed", "7"});
+  ASSERT_EQ(r.exit.code, 0) << r.output;
+  ASSERT_EQ(world_parts().size(), 15U);
+  r = cellctl({"submit", cell::testing::source_dir() + "/config/jobs/table_ics.yaml", "--id",
+               "table-1", "--wait"},
+              600s);
+  EXPECT_EQ(r.exit.code, 0) << r.output;
+  const json status = job("table-1");
+  EXPECT_EQ(status["state"], "succeeded") << status.dump(2);
+  EXPECT_EQ(status["parts_done"], 15) << status.dump(2);
+  std::printf("table job: %s in %.1f s\n", status.value("state", "?").c_str(),
+              status.value("elapsed_s", 0.0));
+  expect_all_in_slots(15);
+}
+
+TEST_F(TaskCellTest, ConveyorStreamAtHalfAMetrePerSecondIsPickedAndTheMissesAddUp) {
+  const std::string scene = write("belt.yaml", belt_scene(500.0, 2.0));
+  start_cell(scene);
+  ASSERT_FALSE(HasFailure());
+  // Not the subject here: the belt camera calibrated as the simulator knows it.
+  (void)child("calibration")->stop(10s);
+  store_truth_calibration("belt_cam", "scara_picker",
+                          Eigen::Isometry3d(Eigen::Translation3d(kPickerBaseX, 0, kPickerBaseZ)),
+                          -200.0);
+  ASSERT_FALSE(HasFailure());
+  start("calibration2", "cell-calibration", dir_ + "/calibration.yaml");
+  ASSERT_TRUE(eventually(
+      [&] {
+        const ToolRun show = cellctl({"--json", "calibration", "show", "--camera", "belt_cam"});
+        return show.exit.code == 0 && show.output.find("simulator's truth") != std::string::npos;
+      },
+      30s));
+  ASSERT_EQ(cellctl({"robot", "home", "--robot", "scara_picker"}).exit.code, 0);
+  ASSERT_EQ(cellctl({"world", "reset", "--scene", scene}).exit.code, 0);
+  ToolRun r = cellctl({"submit", cell::testing::source_dir() + "/config/jobs/conveyor_ics.yaml",
+                       "--id", "belt-1", "--wait"},
+                      300s);
+  EXPECT_EQ(r.exit.code, 0) << r.output;
+  ASSERT_EQ(cellctl({"world", "belt", "--id", "belt1", "--speed", "0"}).exit.code, 0);
+  const json status = job("belt-1");
+  ASSERT_EQ(status["state"], "succeeded") << status.dump(2);
+  // By ground truth: in the bin (beside the belt at the job's slot, picker (100, -300)), fallen
+  // off the belt's end (missed), still on the belt (not yet past the window at the end).
+  int in_bin = 0, fell_off = 0, on_belt = 0;
+  for (const json& p : world_parts()) {
+    const double x = p["pose"]["x_mm"].get<double>() - kPickerBaseX;
+    const double y = p["pose"]["y_mm"].get<double>();
+    if (p["support"] == "floor" && std::hypot(x - 100.0, y + 300.0) < 60.0) {
+      ++in_bin;
+    } else if (p["support"] == "floor") {
+      ++fell_off;
+    } else {
+      ++on_belt;
+    }
+  }
+  const json counters = status["counters"];
+  const int picked = counters.value("picked", 0);
+  int causes = 0;
+  for (auto it = counters.begin(); it != counters.end(); ++it) {
+    if (it.key() != "picked") {
+      causes += it.value().get<int>();
+    }
+  }
+  const int recognised_misses = causes - counters.value("locate_failed", 0);
+  std::printf("belt at 0.5 m/s for 60 s: %d in the bin, %d fell off the end, %d on the belt; "
+              "job: picked %d, %s\n",
+              in_bin, fell_off, on_belt, picked, counters.dump().c_str());
+  // Every pick the job counts is a part in the bin, give or take one grasp the gripper closed
+  // on nothing (the simulated gripper has no part sensor).
+  EXPECT_GE(in_bin, picked - 1);
+  EXPECT_LE(in_bin, picked);
+  // The misses add up: every part that left the belt's end is a counted cause (or the one
+  // grasp above).
+  EXPECT_GE(causes + (picked - in_bin), fell_off - 1);
+  EXPECT_LE(causes, fell_off + on_belt);
+  EXPECT_GE(picked + causes, 25);  // 60 s, a part every 2 s
+  // Of the parts the vision service recognised, at least 99% picked. The vision service
+  // leaves some DIPs on the dark belt 'unknown' (reported as touching: a defect of core/vision
+  // on the belt camera, counted as locate_failed); with those, the picked fraction is lower.
+  EXPECT_GE(static_cast<double>(in_bin) / std::max(1, in_bin + recognised_misses), 0.99);
+  EXPECT_GE(static_cast<double>(in_bin) / std::max(1, in_bin + fell_off), 0.80);
+}
+
+TEST_F(TaskCellTest, KilledTwentyTimesTheTableJobStillPlacesEveryPartOnce) {
+  start_cell("config/scenes/table_ics.yaml");
+  ASSERT_FALSE(HasFailure());
+  (void)child("calibration")->stop(10s);
+  store_truth_calibration("ibm7545_eye", "", Eigen::Isometry3d::Identity(), -231.51);
+  ASSERT_FALSE(HasFailure());
+  start("calibration2", "cell-calibration", dir_ + "/calibration.yaml");
+  ASSERT_TRUE(eventually(
+      [&] {
+        const ToolRun show = cellctl({"--json", "calibration", "show", "--camera", "ibm7545_eye"});
+        return show.exit.code == 0 && show.output.find("simulator's truth") != std::string::npos;
+      },
+      30s));
+  // Bad requests first: refused with their reasons, nothing else affected.
+  const std::string bad = write("bad.yaml", "kind: table_pick_place\nrobot: ibm7545\n"
+                                            "camera: ibm7545_eye\nwindows: [{joints: [45]}]\n"
+                                            "plaec: {pattern: row}\n");
+  ToolRun r = submit(bad, "bad-1");
+  EXPECT_NE(r.exit.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("plaec"));
+  std::ifstream f(cell::testing::source_dir() + "/config/jobs/table_ics.yaml");
+  std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  std::string other = text;
+  other.replace(other.find("robot: ibm7545"), 14, "robot: ibm9999");
+  r = submit(write("unknown-robot.yaml", other), "bad-2");
+  EXPECT_NE(r.exit.code, 0);
+  EXPECT_THAT(r.output, HasSubstr("unknown robot 'ibm9999'"));
+  EXPECT_EQ(job("bad-1").value("state", ""), "rejected");
+
+  r = submit(cell::testing::source_dir() + "/config/jobs/table_ics.yaml", "durable-1");
+  ASSERT_EQ(r.exit.code, 0) << r.output;
+  std::mt19937 rng(20261201);
+  std::uniform_int_distribution<int> pause_ms(1500, 5000);
+  int kills = 0;
+  for (; kills < 20; ++kills) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms(rng)));
+    const std::string state = job("durable-1").value("state", "");
+    if (state == "succeeded" || state == "failed") {
+      break;
+    }
+    process::Child* task = child(kills == 0 ? "task" : fmt::format("task{}", kills));
+    ASSERT_NE(task, nullptr);
+    ASSERT_EQ(::kill(task->pid(), SIGKILL), 0);
+    (void)task->wait_for(5s);
+    start(fmt::format("task{}", kills + 1), "cell-task", dir_ + "/task.yaml");
+  }
+  std::printf("killed cell-task %d times during the job\n", kills);
+  EXPECT_GE(kills, 15);  // most of them while the job ran
+  const json status = wait_end("durable-1", 600s);
+  EXPECT_EQ(status["state"], "succeeded") << status.dump(2) << logs();
+  expect_all_in_slots(15);
+  // No part picked twice: the simulator saw exactly one grasp per part.
+  EXPECT_EQ(grasps_in_world_log(), 15U);
+  // One job, one id: the journal did not duplicate it.
+  const json jobs = parsed(cellctl({"--json", "jobs"}));
+  int durable = 0;
+  for (const json& j : jobs) {
+    durable += j.value("job_id", "") == "durable-1" ? 1 : 0;
+  }
+  EXPECT_EQ(durable, 1);
+}
+
+}  // namespace
+}  // namespace cell::task_test
