@@ -6,6 +6,8 @@
 //     to the page (the stream message's arrival), and to the first frame that drew it.
 // Targets (issue 10): 60 fps, delay under 50 ms.
 //   monitor_bench [--seconds S] [--parts N] [--json]      (node; CELL_BIN_DIR, CELL_SOURCE_DIR)
+import { readFileSync } from 'node:fs';
+
 import { Cell, openBrowser, sleep, until } from '../../clients/monitor/web/tests/cell.mjs';
 
 const args = process.argv.slice(2);
@@ -13,6 +15,24 @@ const opt = (name, fallback) => {
   const i = args.indexOf(name);
   return i >= 0 ? Number(args[i + 1]) : fallback;
 };
+/// The bridge's pid, from its heartbeat (`cellctl ping`).
+function bridgePid() {
+  const ping = cell.cellctl('--json', 'ping');
+  if (ping.code !== 0) return null;
+  const services = JSON.parse(ping.stdout.slice(ping.stdout.indexOf('{'))).services;
+  const monitor = services.find((x) => x.kind === 'monitor' || x.id === 'monitor');
+  return monitor ? monitor.pid : null;
+}
+
+/// User + system CPU time of a process [s] (/proc/<pid>/stat, fields 14 and 15, in clock ticks
+/// of 100 Hz on Linux).
+function cpuSeconds(pid) {
+  if (!pid) return 0;
+  const stat = readFileSync(`/proc/${pid}/stat`, 'utf8');
+  const fields = stat.slice(stat.lastIndexOf(')') + 2).split(' ');
+  return (Number(fields[11]) + Number(fields[12])) / 100;
+}
+
 const seconds = opt('--seconds', 20);
 const partsWanted = opt('--parts', 50);
 const asJson = args.includes('--json');
@@ -64,7 +84,11 @@ try {
   await sleep(2000);
   const t0 = await page.evaluate(() => performance.timeOrigin + performance.now());
   const frames0 = await page.evaluate(() => window.cellMonitor.stats().frames);
+  const bridge = bridgePid();
+  const cpu0 = cpuSeconds(bridge);
+  const wall0 = Date.now();
   await sleep(seconds * 1000);
+  const bridgeCpu = bridge ? 100 * (cpuSeconds(bridge) - cpu0) / ((Date.now() - wall0) / 1000) : null;
   const result = await page.evaluate(([since]) => {
     const m = window.cellMonitor;
     const frames = m.frameTimes().filter((t) => t >= since);
@@ -96,6 +120,7 @@ try {
     state_to_page_ms: quantiles(result.delays),
     state_to_frame_ms: quantiles(result.rendered),
     state_to_native_reader_ms: quantiles(native),
+    bridge_cpu_percent: bridgeCpu,  // of one core, user + system, over the window
     targets: { fps: 60, state_to_page_ms: 50 },
   };
   if (asJson) {
@@ -108,6 +133,7 @@ try {
     console.log(`  RobotState -> page [ms]       ${f(out.state_to_page_ms)}   (target < 50)`);
     console.log(`  RobotState -> drawn [ms]      ${f(out.state_to_frame_ms)}`);
     console.log(`  peer: RobotState -> native DDS reader [ms]  ${f(out.state_to_native_reader_ms)}`);
+    console.log(`  bridge CPU [% of one core]    ${bridgeCpu === null ? '?' : bridgeCpu.toFixed(1)}   (cell-monitor, user + system)`);
   }
   if (browser.errors.length) {
     log('page errors:', browser.errors);

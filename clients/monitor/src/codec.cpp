@@ -314,6 +314,8 @@ std::string_view job_kind_name(int kind) noexcept {
   }
 }
 
+// The names `cellctl job` uses (clients/cellctl/src/job_commands.cpp), so that the page and the
+// command line say the same thing of a part.
 std::string_view part_outcome_name(int outcome) noexcept {
   switch (outcome) {
     case cell_task_PART_PENDING:
@@ -321,11 +323,11 @@ std::string_view part_outcome_name(int outcome) noexcept {
     case cell_task_PART_PLACED:
       return "placed";
     case cell_task_PART_SKIPPED_UNREACHABLE:
-      return "skipped_unreachable";
+      return "unreachable";
     case cell_task_PART_SKIPPED_GRIP_BLOCKED:
-      return "skipped_grip_blocked";
+      return "grip_blocked";
     case cell_task_PART_SKIPPED_OUTSIDE_WINDOW:
-      return "skipped_outside_window";
+      return "outside_window";
     case cell_task_PART_LOCATE_FAILED:
       return "locate_failed";
     case cell_task_PART_MISSED:

@@ -12,22 +12,6 @@ namespace {
 
 using nlohmann::json;
 
-Result<double> number_field(const json& body, const char* key, double fallback, double lo,
-                            double hi, const char* unit) {
-  if (!body.contains(key) || body[key].is_null()) {
-    return fallback;
-  }
-  if (!body[key].is_number()) {
-    return Error{Errc::kInvalidArgument, fmt::format("field '{}' must be a number", key)};
-  }
-  const double v = body[key].get<double>();
-  if (!std::isfinite(v) || v < lo || v > hi) {
-    return Error{Errc::kOutOfRange,
-                 fmt::format("field '{}' must be in [{}, {}]{}, got {}", key, lo, hi, unit, v)};
-  }
-  return v;
-}
-
 Result<bool> bool_field(const json& body, const char* key) {
   if (!body.contains(key) || body[key].is_null()) {
     return false;
@@ -164,6 +148,26 @@ bool safe_name(const std::string& text) noexcept {
     }
   }
   return true;
+}
+
+Result<double> number_field(const json& body,
+                            const char* key,
+                            double fallback,
+                            double lo,
+                            double hi,
+                            std::string_view unit) {
+  if (!body.contains(key) || body[key].is_null()) {
+    return fallback;
+  }
+  if (!body[key].is_number()) {
+    return Error{Errc::kInvalidArgument, fmt::format("field '{}' must be a number", key)};
+  }
+  const double v = body[key].get<double>();
+  if (!std::isfinite(v) || v < lo || v > hi) {
+    return Error{Errc::kOutOfRange, fmt::format("field '{}' must be in [{}, {}]{}{}, got {}", key, lo,
+                                                hi, unit.empty() ? "" : " ", unit, v)};
+  }
+  return v;
 }
 
 Result<std::string> string_field(const json& body, const char* key) {

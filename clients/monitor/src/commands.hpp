@@ -2,6 +2,7 @@
 
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -86,6 +87,16 @@ Result<Eigen::Isometry3d> grasp_tool_pose(const kinematics::RobotModel& model,
 /// Reads a required string field. Errors: kInvalidArgument "missing field 'robot'" or
 /// "field 'robot' must be a string".
 Result<std::string> string_field(const nlohmann::json& body, const char* key);
+
+/// A finite number field that may be absent or null (then `fallback`), within [lo, hi].
+/// Errors: kInvalidArgument "field 'speed' must be a number"; kOutOfRange "field 'speed' must be
+/// in [0.01, 1], got 2" (with `unit` after the range when not empty).
+Result<double> number_field(const nlohmann::json& body,
+                            const char* key,
+                            double fallback,
+                            double lo,
+                            double hi,
+                            std::string_view unit);
 
 /// [A-Za-z0-9_.-]{1,64}: ids and file names the bridge accepts from the page.
 bool safe_name(const std::string& text) noexcept;

@@ -141,23 +141,6 @@ Result<bool> optional_bool(const json& body, const char* key, bool fallback) {
   return body[key].get<bool>();
 }
 
-/// A finite number field that may be absent (then `fallback`), within [lo, hi].
-Result<double> optional_number(const json& body, const char* key, double fallback, double lo,
-                               double hi, std::string_view unit) {
-  if (!body.contains(key) || body[key].is_null()) {
-    return fallback;
-  }
-  if (!body[key].is_number()) {
-    return Error{Errc::kInvalidArgument, fmt::format("field '{}' must be a number", key)};
-  }
-  const double v = body[key].get<double>();
-  if (!std::isfinite(v) || v < lo || v > hi) {
-    return Error{Errc::kOutOfRange,
-                 fmt::format("field '{}' must be in [{}, {}] {}, got {}", key, lo, hi, unit, v)};
-  }
-  return v;
-}
-
 /// The clear-grip models of the vision service's config (`locate.grasps`: class, finger sizes,
 /// styles), as the page's fingerprint overlay wants them (angles in rad). The file belongs to
 /// another service: anything unexpected in it means no fingerprints, never a failed start.
@@ -1108,8 +1091,8 @@ void MonitorService::handle_goto_part(const httplib::Request& req, httplib::Resp
   MotionCommand cmd;
   cmd.robot_id = *robot_id;
   auto preview = optional_bool(*body, "preview", false);
-  auto speed = optional_number(*body, "speed", 0.5, 0.01, 1.0, "");
-  auto approach = optional_number(*body, "approach_mm", config_.approach_mm, 0.0, 500.0, "mm");
+  auto speed = number_field(*body, "speed", 0.5, 0.01, 1.0, "");
+  auto approach = number_field(*body, "approach_mm", config_.approach_mm, 0.0, 500.0, "mm");
   for (const Status& s : {preview ? ok_status() : Status(preview.error()),
                           speed ? ok_status() : Status(speed.error()),
                           approach ? ok_status() : Status(approach.error())}) {
@@ -1447,7 +1430,7 @@ void MonitorService::handle_teach(const std::string& action, const httplib::Requ
                                                : teach::GripperAction::kClose);
     }
   } else if (action == "wait") {
-    auto seconds = optional_number(b, "seconds", std::nan(""), 0.0, 3600.0, "s");
+    auto seconds = number_field(b, "seconds", std::nan(""), 0.0, 3600.0, "s");
     status = !seconds                ? Status(seconds.error())
              : std::isnan(*seconds) ? Status(Error{Errc::kInvalidArgument,
                                                    "field 'seconds' must be a number"})

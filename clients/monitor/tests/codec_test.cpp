@@ -156,5 +156,55 @@ TEST(Codec, DetectionsAndEdgeWindowsForTheImageOverlay) {
   EXPECT_DOUBLE_EQ(edge["end_px"][0].get<double>(), 21.0);
 }
 
+// The job list's per-part results: every outcome in the words `cellctl job` uses, positions in
+// mm and deg, reasons and counters as the task service sent them.
+TEST(Codec, JobStatusCarriesEachPartsResultInCellctlsWords) {
+  const std::string job = "job-7", cls = "ic_7x30", none, why = "robot is busy";
+  std::vector<cell_task_PartResult> parts;
+  const std::vector<std::pair<cell_task_PartOutcome, std::string>> outcomes{
+      {cell_task_PART_PENDING, "pending"},
+      {cell_task_PART_PLACED, "placed"},
+      {cell_task_PART_SKIPPED_UNREACHABLE, "unreachable"},
+      {cell_task_PART_SKIPPED_GRIP_BLOCKED, "grip_blocked"},
+      {cell_task_PART_SKIPPED_OUTSIDE_WINDOW, "outside_window"},
+      {cell_task_PART_LOCATE_FAILED, "locate_failed"},
+      {cell_task_PART_MISSED, "missed"}};
+  for (std::size_t i = 0; i < outcomes.size(); ++i) {
+    cell_task_PartResult p{};
+    p.index = static_cast<std::uint32_t>(i);
+    p.class_name = bus::borrow(cls);
+    p.outcome = outcomes[i].first;
+    p.placed_at.x_mm = -310.0;
+    p.placed_at.y_mm = 250.0 + 30.0 * static_cast<double>(i);
+    p.placed_at.rz_rad = std::numbers::pi / 2;
+    p.detail = bus::borrow(i == 2 ? why : none);
+    parts.push_back(p);
+  }
+  std::vector<char*> reasons{const_cast<char*>(why.c_str())};
+  cell_task_JobStatus st{};
+  st.job_id = bus::borrow(job);
+  st.state = cell_task_JOB_FAILED;
+  st.kind = cell_task_JOB_TABLE_PICK_PLACE;
+  st.parts_done = 1;
+  st.parts_failed = 5;
+  bus::borrow(st.parts, parts);
+  st.reasons._buffer = reasons.data();
+  st.reasons._length = st.reasons._maximum = 1;
+  const json j = job_status_json(st);
+  EXPECT_EQ(j["job_id"], job);
+  EXPECT_EQ(j["state"], "failed");
+  EXPECT_EQ(j["parts_done"], 1);
+  EXPECT_EQ(j["parts_failed"], 5);
+  EXPECT_EQ(j["reasons"], json::array({why}));
+  ASSERT_EQ(j["parts"].size(), outcomes.size());
+  for (std::size_t i = 0; i < outcomes.size(); ++i) {
+    EXPECT_EQ(j["parts"][i]["outcome"], outcomes[i].second) << i;
+    EXPECT_EQ(j["parts"][i]["index"], i);
+    EXPECT_EQ(j["parts"][i]["class"], cls);
+  }
+  EXPECT_DOUBLE_EQ(j["parts"][3]["placed_at"]["y_mm"].get<double>(), 340.0);
+  EXPECT_EQ(j["parts"][2]["detail"], why);
+}
+
 }  // namespace
 }  // namespace cell::monitor

@@ -143,13 +143,15 @@ class RobotView {
       tool = t;
     }
     this.tool = tool;
-    // Fingers: either side of the tool point along its y axis, closer when closed; they hang
-    // along the approach direction (down for the SCARA, along a for the arm).
+    // Fingers: either side of the tool point along its y axis, closer when closed. The tool
+    // point is the grasp point (a part is gripped with it at the part's grasp height), so the
+    // 40 mm fingers end there and reach back towards the flange, against the approach
+    // direction (down for the SCARA, along a for the arm).
     const open = gripper === 'closed' || gripper === 'closing' ? 9 : 22;
     const approach = model.kind === 'scara' ? -1 : 1;
     for (let s = 0; s < 2; ++s) {
       const side = s ? -1 : 1;
-      this.fingers[s].matrix.copy(matrix4(K.multiply(tool, K.translation(0, side * open, approach * 20))));
+      this.fingers[s].matrix.copy(matrix4(K.multiply(tool, K.translation(0, side * open, -approach * 20))));
     }
     this.toolAxes.matrix.copy(matrix4(tool));
     this.group.updateMatrixWorld(true);
@@ -510,7 +512,7 @@ export class CellScene {
     const wt = robot.worldTool();
     const p = K.position(wt), n = K.column(wt, 0), a = K.column(wt, 2);
     const look = robot.model.kind === 'scara' ? -1 : 1;
-    const ahead = 45;  // just past the finger tips (they hang 40 mm along the approach)
+    const ahead = 2;  // between the finger tips (the tool point), just past them
     this.gripperCam.position.set(p[0] + look * a[0] * ahead, p[1] + look * a[1] * ahead,
       p[2] + look * a[2] * ahead);
     this.gripperCam.up.set(...n);

@@ -5,7 +5,7 @@
 //
 // Environment: CELL_BIN_DIR (the build's bin/), CELL_SOURCE_DIR (the checkout).
 import { execFileSync, spawn, spawnSync } from 'node:child_process';
-import { existsSync, mkdtempSync, rmSync, writeFileSync } from 'node:fs';
+import { existsSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { createRequire } from 'node:module';
 import { createServer } from 'node:net';
 import { tmpdir } from 'node:os';
@@ -150,7 +150,11 @@ export class Cell {
       services.push('  - {name: vision, exec: cell-vision, config: config/vision.yaml}');
     }
     if (this.has('cell-task') && existsSync(join(this.src, 'config/task.yaml'))) {
-      services.push('  - {name: task, exec: cell-task, config: config/task.yaml}');
+      // The shipped config with a journal of this run's own: a job another run left "running"
+      // in the checkout's journal would otherwise resume here and hold the robot.
+      const task = readFileSync(join(this.src, 'config/task.yaml'), 'utf8')
+        .replace(/^journal:.*$/m, `journal: ${this.dir}/task/journal.sqlite`);
+      services.push(`  - {name: task, exec: cell-task, config: ${this.write('task.yaml', task)}}`);
     }
     for (const s of this.options.extraServices || []) services.push(s);
     this.profile = this.write('profile.yaml', [
@@ -169,9 +173,25 @@ export class Cell {
     this.launcher.stderr.on('data', (d) => { this.output += d; });
     this.url = `http://127.0.0.1:${this.port}/`;
     await until(async () => (await fetch(`${this.url}api/status`)).ok, 60000, 'the monitor to serve');
+    // Every service up and serving (heartbeats), so that none meets a job before it has
+    // found the others on the bus.
+    this.serviceCount = services.length;
+    await until(() => {
+      const ping = this.cellctl('--json', 'ping');
+      if (ping.code !== 0) return false;
+      const all = JSON.parse(ping.stdout.slice(ping.stdout.indexOf('{'))).services;
+      return all.filter((x) => x.state === 'serving').length >= this.serviceCount;
+    }, 90000, `all ${services.length} services serving`, 500);
     // The robots up and homed (the ideal robot starts unhomed, like the real ones).
     for (const robot of this.options.robots) {
       await until(() => this.cellctl('robot', 'home', '--robot', robot).code === 0, 60000, `${robot} homed`, 500);
+    }
+    // The 7545's lights: its gateway starts them off (the latch is write-only), and in the dark
+    // the eye-in-hand camera sees black blobs vision cannot classify. An operator switches them
+    // on before a job; so does this cell.
+    if (this.options.robots.includes('ibm7545')) {
+      const lit = this.cellctl('robot', 'lights', '--robot', 'ibm7545', '--halogen', '--fluorescent');
+      if (lit.code !== 0) throw new Error(`cellctl robot lights: ${lit.stdout}${lit.stderr}`);
     }
   }
 
