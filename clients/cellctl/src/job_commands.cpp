@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
 
+#include "cell/task/job_state.hpp"
 #include "cell/bus/reader.hpp"
 #include "cell/bus/request_reply.hpp"
 #include "cell/bus/topics.hpp"
@@ -29,25 +30,7 @@ namespace {
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
-std::string_view state_name(cell_task_JobState s) {
-  switch (s) {
-    case cell_task_JOB_QUEUED:
-      return "queued";
-    case cell_task_JOB_REJECTED:
-      return "rejected";
-    case cell_task_JOB_RUNNING:
-      return "running";
-    case cell_task_JOB_PAUSED:
-      return "paused";
-    case cell_task_JOB_SUCCEEDED:
-      return "succeeded";
-    case cell_task_JOB_FAILED:
-      return "failed";
-    case cell_task_JOB_CANCELLED:
-      return "cancelled";
-  }
-  return "unknown";
-}
+std::string_view state_name(cell_task_JobState s) { return task::job_state_name(s); }
 
 std::string_view kind_name(cell_task_JobKind k) {
   switch (k) {

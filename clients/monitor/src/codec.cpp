@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "cell/task/job_state.hpp"
 #include "cell/bus/view.hpp"
 #include "cell/geometry/idl_pose.hpp"
 
@@ -278,26 +279,7 @@ std::string_view motion_state_name(int state) noexcept {
   }
 }
 
-std::string_view job_state_name(int state) noexcept {
-  switch (state) {
-    case cell_task_JOB_QUEUED:
-      return "queued";
-    case cell_task_JOB_REJECTED:
-      return "rejected";
-    case cell_task_JOB_RUNNING:
-      return "running";
-    case cell_task_JOB_PAUSED:
-      return "paused";
-    case cell_task_JOB_SUCCEEDED:
-      return "succeeded";
-    case cell_task_JOB_FAILED:
-      return "failed";
-    case cell_task_JOB_CANCELLED:
-      return "cancelled";
-    default:
-      return "unknown";
-  }
-}
+std::string_view job_state_name(int state) noexcept { return task::job_state_name(state); }
 
 std::string_view job_kind_name(int kind) noexcept {
   switch (kind) {

@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include "cell/task/job_state.hpp"
 #include "cell/bus/request_reply.hpp"
 #include "cell/bus/topics.hpp"
 #include "cell/bus/view.hpp"
@@ -23,25 +24,7 @@ constexpr dds_attach_t kStop = 1;
 constexpr dds_attach_t kRequest = 2;
 constexpr dds_attach_t kCommand = 3;
 
-std::string state_name(cell_task_JobState s) {
-  switch (s) {
-    case cell_task_JOB_QUEUED:
-      return "queued";
-    case cell_task_JOB_REJECTED:
-      return "rejected";
-    case cell_task_JOB_RUNNING:
-      return "running";
-    case cell_task_JOB_PAUSED:
-      return "paused";
-    case cell_task_JOB_SUCCEEDED:
-      return "succeeded";
-    case cell_task_JOB_FAILED:
-      return "failed";
-    case cell_task_JOB_CANCELLED:
-      return "cancelled";
-  }
-  return "unknown";
-}
+std::string state_name(cell_task_JobState s) { return std::string(task::job_state_name(s)); }
 
 cell_task_JobState state_from(const std::string& s) {
   for (const auto st : {cell_task_JOB_QUEUED, cell_task_JOB_REJECTED, cell_task_JOB_RUNNING,
