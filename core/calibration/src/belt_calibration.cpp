@@ -16,6 +16,7 @@
 
 #include "cell/bus/view.hpp"
 #include "cell/config/yaml.hpp"
+#include "file_util.hpp"
 
 namespace cell::calibration {
 namespace {
@@ -120,24 +121,7 @@ std::string format_belt_calibration(const BeltCalibration& b) {
 
 Status save_belt_calibration(const BeltCalibration& b, const std::string& path) {
   CELL_TRY(b.validate());
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::trunc);
-    if (!f) {
-      return Error{Errc::kConfig, fmt::format("{}: cannot write: {}", tmp, std::strerror(errno))};
-    }
-    f << format_belt_calibration(b);
-    f.flush();
-    if (!f) {
-      return Error{Errc::kConfig, fmt::format("{}: write failed: {}", tmp, std::strerror(errno))};
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    return Error{Errc::kConfig, fmt::format("{}: cannot rename to {}: {}", tmp, path, ec.message())};
-  }
-  return ok_status();
+  return detail::write_atomically(path, format_belt_calibration(b));
 }
 
 cell_calibration_BeltCalibration to_idl(const BeltCalibration& b, BeltIdlHolder& holder,

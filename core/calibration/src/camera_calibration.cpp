@@ -15,6 +15,7 @@
 #include "cell/config/yaml.hpp"
 #include "cell/geometry/idl_pose.hpp"
 #include "cell/geometry/pose.hpp"
+#include "file_util.hpp"
 
 namespace cell::calibration {
 namespace {
@@ -267,25 +268,7 @@ std::string format_camera_calibration(const CameraCalibration& c) {
 
 Status save_camera_calibration(const CameraCalibration& calibration, const std::string& path) {
   CELL_TRY(calibration.validate());
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::trunc);
-    if (!f) {
-      return Error{Errc::kConfig, fmt::format("{}: cannot write: {}", tmp, std::strerror(errno))};
-    }
-    f << format_camera_calibration(calibration);
-    f.flush();
-    if (!f) {
-      return Error{Errc::kConfig, fmt::format("{}: write failed: {}", tmp, std::strerror(errno))};
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    return Error{Errc::kConfig, fmt::format("{}: cannot rename to {}: {}", tmp, path,
-                                            ec.message())};
-  }
-  return ok_status();
+  return detail::write_atomically(path, format_camera_calibration(calibration));
 }
 
 Result<CameraCalibration> nominal_calibration(const render::CameraDescription& camera,

@@ -291,16 +291,6 @@ Result<std::pair<Eigen::Isometry3d, Eigen::Isometry3d>> planar_closed_form(
   return std::make_pair(cam, target);
 }
 
-std::set<std::size_t> holdout_indices(std::size_t n, std::size_t h) {
-  std::set<std::size_t> out;
-  for (std::size_t k = 0; k < h; ++k) {
-    out.insert(std::min(n - 1, static_cast<std::size_t>((static_cast<double>(k) + 0.5) *
-                                                        static_cast<double>(n) /
-                                                        static_cast<double>(h))));
-  }
-  return out;
-}
-
 struct Problem {
   std::array<double, kIntrinsicsSize> intrinsics{};
   Pose6 x{};
@@ -587,31 +577,15 @@ Result<HandEyeReport> calibrate_hand_eye(const std::vector<HandEyeSample>& sampl
       }
     }
   }
-  const std::size_t min_fit = static_cast<std::size_t>(options.min_fit_samples);
-  std::size_t holdout = 0;
-  if (options.holdout_fraction > 0.0) {
-    holdout = std::max<std::size_t>(
-        {static_cast<std::size_t>(options.min_holdout_samples), 1,
-         static_cast<std::size_t>(std::floor(options.holdout_fraction *
-                                             static_cast<double>(usable.size())))});
-    if (usable.size() >= min_fit + 1 && usable.size() < min_fit + holdout) {
-      holdout = usable.size() - min_fit;
-    }
+  auto split = detail::split_holdout(usable, samples.size(), options.min_fit_samples,
+                                     options.min_holdout_samples, options.holdout_fraction,
+                                     "samples");
+  if (!split) {
+    return std::move(split).error();
   }
-  if (usable.size() < min_fit + holdout) {
-    return Error{Errc::kInvalidArgument,
-                 fmt::format("too few samples: {} given, {} usable ({} rejected), {} needed ({} "
-                             "to fit{})",
-                             samples.size(), usable.size(), samples.size() - usable.size(),
-                             min_fit + holdout, min_fit,
-                             holdout > 0 ? fmt::format(" and {} to hold out", holdout) : "")};
-  }
-  const std::set<std::size_t> held = holdout_indices(usable.size(), holdout);
-  std::vector<std::size_t> fit_idx;
-  std::vector<std::size_t> hold_idx;
-  for (std::size_t k = 0; k < usable.size(); ++k) {
-    (held.count(k) != 0 ? hold_idx : fit_idx).push_back(usable[k]);
-  }
+  const std::vector<std::size_t>& fit_idx = split->fit;
+  const std::vector<std::size_t>& hold_idx = split->held;
+  const auto min_fit = static_cast<std::size_t>(options.min_fit_samples);
   std::vector<Eigen::Isometry3d> a_fit;
   std::vector<Eigen::Isometry3d> c_fit;
   for (const std::size_t i : fit_idx) {

@@ -130,17 +130,6 @@ std::vector<cv::Point2f> cv_image(const BoardObservation& obs) {
   return out;
 }
 
-/// Which of n views to hold out: h of them, spread evenly.
-std::set<std::size_t> holdout_indices(std::size_t n, std::size_t h) {
-  std::set<std::size_t> out;
-  for (std::size_t k = 0; k < h; ++k) {
-    out.insert(std::min(n - 1, static_cast<std::size_t>(
-                                   (static_cast<double>(k) + 0.5) * static_cast<double>(n) /
-                                   static_cast<double>(h))));
-  }
-  return out;
-}
-
 }  // namespace
 
 Status IntrinsicsOptions::validate() const {
@@ -280,32 +269,14 @@ Result<IntrinsicsReport> calibrate_intrinsics(const std::vector<BoardView>& view
     }
   }
   // Hold-out views: every result carries a figure on views the fit never saw.
-  const std::size_t min_fit = static_cast<std::size_t>(options.min_fit_views);
-  std::size_t holdout = 0;
-  if (options.holdout_fraction > 0.0) {
-    holdout = std::max<std::size_t>(
-        static_cast<std::size_t>(options.min_holdout_views),
-        static_cast<std::size_t>(std::floor(options.holdout_fraction *
-                                            static_cast<double>(usable.size()))));
-    holdout = std::max<std::size_t>(holdout, 1);
-    if (usable.size() >= min_fit + 1 && usable.size() < min_fit + holdout) {
-      holdout = usable.size() - min_fit;
-    }
+  auto split = detail::split_holdout(usable, views.size(), options.min_fit_views,
+                                     options.min_holdout_views, options.holdout_fraction, "views");
+  if (!split) {
+    return std::move(split).error();
   }
-  if (usable.size() < min_fit + holdout) {
-    return Error{Errc::kInvalidArgument,
-                 fmt::format("too few views: {} given, {} usable ({} rejected), {} needed ({} to "
-                             "fit{})",
-                             views.size(), usable.size(), views.size() - usable.size(),
-                             min_fit + holdout, min_fit,
-                             holdout > 0 ? fmt::format(" and {} to hold out", holdout) : "")};
-  }
-  const std::set<std::size_t> held = holdout_indices(usable.size(), holdout);
-  std::vector<std::size_t> fit_idx;
-  std::vector<std::size_t> hold_idx;
-  for (std::size_t k = 0; k < usable.size(); ++k) {
-    (held.count(k) != 0 ? hold_idx : fit_idx).push_back(usable[k]);
-  }
+  const std::vector<std::size_t>& fit_idx = split->fit;
+  const std::vector<std::size_t>& hold_idx = split->held;
+  const auto min_fit = static_cast<std::size_t>(options.min_fit_views);
 
   // (1) Closed form.
   report_progress(progress, "init", 0, 0, "closed form (Zhang) and a pose per view");

@@ -14,6 +14,12 @@ Status MarkerOptions::validate() const {
                  fmt::format("marker options: threshold must be -1 (Otsu) or 0..255, got {}",
                              threshold)};
   }
+  if (background_px < 0 || background_px == 1 || (background_px > 0 && background_px % 2 == 0)) {
+    return Error{Errc::kInvalidArgument,
+                 fmt::format("marker options: background_px must be 0 (off) or an odd side >= 3, "
+                             "got {}",
+                             background_px)};
+  }
   if (!(min_area_px >= 0.0) || !(max_area_px > min_area_px)) {
     return Error{Errc::kInvalidArgument, "marker options: need 0 <= min_area_px < max_area_px"};
   }
@@ -30,10 +36,22 @@ Result<std::vector<Marker>> locate_markers(const cv::Mat& image, const MarkerOpt
     const cv::Rect region = options.region.area() > 0 ? (options.region & all) : all;
     const cv::Mat roi = image(region);
     cv::Mat binary;
-    const int type = options.bright ? cv::THRESH_BINARY : cv::THRESH_BINARY_INV;
-    const double t = options.threshold >= 0
-                         ? cv::threshold(roi, binary, options.threshold, 255, type)
-                         : cv::threshold(roi, binary, 0, 255, type | cv::THRESH_OTSU);
+    if (options.background_px > 0) {
+      // The marker's contrast to its local background (a top-hat): large uniform areas of any
+      // level (belt, table) go to 0, anything smaller than the square stands out.
+      cv::Mat contrast;
+      cv::morphologyEx(roi, contrast, options.bright ? cv::MORPH_TOPHAT : cv::MORPH_BLACKHAT,
+                       cv::getStructuringElement(
+                           cv::MORPH_RECT, cv::Size(options.background_px, options.background_px)));
+      (void)(options.threshold >= 0
+              ? cv::threshold(contrast, binary, options.threshold, 255, cv::THRESH_BINARY)
+              : cv::threshold(contrast, binary, 0, 255, cv::THRESH_BINARY | cv::THRESH_OTSU));
+    } else {
+      const int type = options.bright ? cv::THRESH_BINARY : cv::THRESH_BINARY_INV;
+      (void)(options.threshold >= 0
+                 ? cv::threshold(roi, binary, options.threshold, 255, type)
+                 : cv::threshold(roi, binary, 0, 255, type | cv::THRESH_OTSU));
+    }
     cv::Mat labels;
     cv::Mat stats;
     cv::Mat centroids;
@@ -68,7 +86,10 @@ Result<std::vector<Marker>> locate_markers(const cv::Mat& image, const MarkerOpt
           cv::mean(patch, cv::countNonZero(core) > 0 ? core : blob)[0];
       cv::Mat ring;
       cv::bitwise_not(far, ring);
-      const double outside = cv::countNonZero(ring) > 0 ? cv::mean(patch, ring)[0] : t;
+      if (cv::countNonZero(ring) == 0) {
+        continue;  // no background around it: a blob filling the region is not a marker
+      }
+      const double outside = cv::mean(patch, ring)[0];
       if (std::abs(inside - outside) < 1.0) {
         continue;
       }

@@ -51,16 +51,6 @@ Eigen::Vector2d board_to_base(const Eigen::Vector3d& pose, const Eigen::Vector2d
   return {pose.x() + c * q.x() - s * q.y(), pose.y() + s * q.x() + c * q.y()};
 }
 
-std::set<std::size_t> holdout_indices(std::size_t n, std::size_t h) {
-  std::set<std::size_t> out;
-  for (std::size_t k = 0; k < h; ++k) {
-    out.insert(std::min(n - 1, static_cast<std::size_t>((static_cast<double>(k) + 0.5) *
-                                                        static_cast<double>(n) /
-                                                        static_cast<double>(h))));
-  }
-  return out;
-}
-
 }  // namespace
 
 Eigen::Vector2d planar_end_effector(const PlanarParameters& p, double j1, double j2) {
@@ -191,26 +181,13 @@ Result<PlanarReport> refine_planar(const PlanarParameters& initial,
       usable.push_back(i);
     }
   }
-  const std::size_t min_fit = static_cast<std::size_t>(options.min_fit_views);
-  std::size_t holdout = 0;
-  if (options.holdout_fraction > 0.0) {
-    holdout = std::max<std::size_t>(
-        {static_cast<std::size_t>(options.min_holdout_views), 1,
-         static_cast<std::size_t>(std::floor(options.holdout_fraction *
-                                             static_cast<double>(usable.size())))});
+  auto split = detail::split_holdout(usable, views.size(), options.min_fit_views,
+                                     options.min_holdout_views, options.holdout_fraction, "views");
+  if (!split) {
+    return std::move(split).error();
   }
-  if (usable.size() < min_fit + holdout) {
-    return Error{Errc::kInvalidArgument,
-                 fmt::format("too few views: {} given, {} usable, {} needed ({} to fit and {} to "
-                             "hold out)",
-                             views.size(), usable.size(), min_fit + holdout, min_fit, holdout)};
-  }
-  const std::set<std::size_t> held = holdout_indices(usable.size(), holdout);
-  std::vector<std::size_t> fit_idx;
-  std::vector<std::size_t> hold_idx;
-  for (std::size_t k = 0; k < usable.size(); ++k) {
-    (held.count(k) != 0 ? hold_idx : fit_idx).push_back(usable[k]);
-  }
+  const std::vector<std::size_t>& fit_idx = split->fit;
+  const std::vector<std::size_t>& hold_idx = split->held;
   auto params = to_vector(initial);
   // The target's pose from the initial model: a 2-D rigid fit of its points to where the
   // model maps their pixels, over the fitted views.

@@ -13,6 +13,7 @@
 #include <fmt/ranges.h>
 
 #include "cell/common/time.hpp"
+#include "file_util.hpp"
 
 namespace cell::calibration {
 namespace {
@@ -35,27 +36,7 @@ Status check_id(const std::string& id) {
 }
 
 Status write_atomically(const fs::path& path, const std::string& text) {
-  std::error_code ec;
-  fs::create_directories(path.parent_path(), ec);
-  if (ec) {
-    return Error{Errc::kIo, fmt::format("{}: cannot create: {}", path.parent_path().string(),
-                                        ec.message())};
-  }
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::trunc);
-    f << text;
-    f.flush();
-    if (!f) {
-      return Error{Errc::kIo, fmt::format("{}: cannot write: {}", tmp.string(), std::strerror(errno))};
-    }
-  }
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    return Error{Errc::kIo, fmt::format("{}: cannot rename to {}: {}", tmp.string(),
-                                        path.string(), ec.message())};
-  }
-  return ok_status();
+  return detail::write_atomically(path.string(), text);
 }
 
 std::string file_name(int number) { return fmt::format("{:04d}.yaml", number); }

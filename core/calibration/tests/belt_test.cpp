@@ -38,11 +38,32 @@ const Eigen::Isometry3d kWorldTBase(Eigen::Translation3d(1000.0, 0.0, 960.0));
 constexpr double kBeltZ = 760.0;
 constexpr double kMarkerHeight = 1.0;
 
-/// belt1 with flat discs riding it: each disc `travels` mm (toward -y) from its start; the
-/// belt camera's truth renders them; the marker locator finds each; `camera` and
-/// `base_T_camera` (a calibration, or the truth) put it in the picker's base.
+/// The table and belt1 of config/scenes/belt_conveyor.yaml, nothing on them.
+render::Scene belt1_scene() {
+  render::Scene scene;
+  scene.table_height_mm = 750.0;
+  render::Belt belt;
+  belt.id = "belt1";
+  belt.origin_mm = Eigen::Vector3d(1350.0, 600.0, kBeltZ);
+  belt.direction = Eigen::Vector3d(0.0, -1.0, 0.0);
+  belt.length_mm = 1500.0;
+  belt.width_mm = 300.0;
+  scene.belts.push_back(belt);
+  return scene;
+}
+
+/// What rides the belt: flat bright markers, or the catalogue's black disc (20 mm, 5 mm high,
+/// reflectance 0.1) that the cell's belt procedure uses (config/calibration/belt_belt1.yaml).
+enum class Rider { kFlatBright, kCatalogueDisc };
+
+/// belt1 with discs riding it: each disc `travels` mm (toward -y) from its start; the belt
+/// camera's truth renders them; the marker locator finds each; `camera` and `base_T_camera` (a
+/// calibration, or the truth) put it in the picker's base.
 std::vector<BeltObservation> belt_samples(const render::CameraModel& camera,
-                                          const Eigen::Isometry3d& base_T_camera) {
+                                          const Eigen::Isometry3d& base_T_camera,
+                                          Rider rider = Rider::kFlatBright) {
+  const bool dark = rider == Rider::kCatalogueDisc;
+  const double height = dark ? 5.0 : kMarkerHeight;
   const render::CameraDescription belt_cam = testing::camera_file("belt_cam.yaml");
   std::vector<BeltObservation> out;
   const std::vector<Eigen::Vector2d> starts = {{1290.0, 320.0}, {1350.0, 340.0}, {1410.0, 300.0}};
@@ -50,23 +71,15 @@ std::vector<BeltObservation> belt_samples(const render::CameraModel& camera,
     for (int k = 0; k < 7; ++k) {
       const double travel = 20.0 + 70.0 * k + 3.0 * static_cast<double>(d);
       const auto count = static_cast<std::int64_t>(std::floor(travel / kTrueMmPerCount));
-      render::Scene scene;
-      scene.table_height_mm = 750.0;
-      render::Belt belt;
-      belt.id = "belt1";
-      belt.origin_mm = Eigen::Vector3d(1350.0, 600.0, kBeltZ);
-      belt.direction = Eigen::Vector3d(0.0, -1.0, 0.0);
-      belt.length_mm = 1500.0;
-      belt.width_mm = 300.0;
-      scene.belts.push_back(belt);
+      render::Scene scene = belt1_scene();
       render::Part disc;
       disc.id = fmt::format("disc{}", d);
       disc.class_name = "marker";
       disc.shape = render::Shape::kDisc;
-      disc.length_mm = 30.0;
-      disc.width_mm = 30.0;
-      disc.height_mm = kMarkerHeight;
-      disc.reflectance = 0.7;
+      disc.length_mm = dark ? 20.0 : 30.0;
+      disc.width_mm = disc.length_mm;
+      disc.height_mm = height;
+      disc.reflectance = dark ? 0.1 : 0.7;
       disc.world_T_part = Eigen::Isometry3d(Eigen::Translation3d(
           starts[d].x(), starts[d].y() - travel, kBeltZ));
       scene.parts.push_back(disc);
@@ -75,16 +88,19 @@ std::vector<BeltObservation> belt_samples(const render::CameraModel& camera,
       // The disc: 30 mm at 0.5 mm/px is about 2800 px; the white table either side of the belt
       // is bright too, but far larger and cut by the image edge.
       MarkerOptions mo;
-      mo.bright = true;
-      mo.min_area_px = 1500.0;
-      mo.max_area_px = 6000.0;
+      mo.bright = !dark;
+      mo.min_area_px = dark ? 800.0 : 1500.0;
+      mo.max_area_px = dark ? 4000.0 : 6000.0;
+      mo.background_px = dark ? 81 : 0;
+      mo.threshold = dark ? 20 : -1;
       auto markers = locate_markers(image, mo);
       EXPECT_THAT(markers, IsOk());
       if (!markers || markers->empty() || markers->front().touches_border) {
         continue;  // out of the field
       }
       auto p = pixel_to_plane(camera, base_T_camera, markers->front().centroid_px,
-                              kBeltZ + kMarkerHeight - kWorldTBase.translation().z());
+                              kBeltZ + (dark ? height / 2.0 : height) -
+                                  kWorldTBase.translation().z());
       EXPECT_THAT(p, IsOk());
       BeltObservation o;
       o.id = fmt::format("{} @ {}", disc.id, count);
@@ -103,19 +119,24 @@ double direction_error_deg(const Eigen::Vector3d& d) {
 
 TEST(Belt, FromTheTrueCameraMmPerCountAndDirectionAreTheBelts) {
   const render::CameraDescription belt_cam = testing::camera_file("belt_cam.yaml");
-  const auto samples =
-      belt_samples(belt_cam.truth.model, kWorldTBase.inverse() * belt_cam.truth.pose);
-  ASSERT_GE(samples.size(), 15U);
-  auto r = calibrate_belt(samples, "belt1", "scara_picker");
-  ASSERT_THAT(r, IsOk());
-  EXPECT_NEAR(r->calibration.mm_per_count, kTrueMmPerCount, kTrueMmPerCount * kScaleTolRel / 10)
-      << r->brief();
-  EXPECT_LT(direction_error_deg(r->calibration.direction), kDirectionTolDeg / 10) << r->brief();
-  EXPECT_LT(r->calibration.rms_mm, 0.05);
-  EXPECT_GT(r->calibration.holdout_mm, 0.0);
-  EXPECT_LT(r->calibration.holdout_mm, 0.1);
-  EXPECT_EQ(r->parts, 3);
-  std::cout << "true camera: " << r->brief() << "\n";
+  // Flat bright markers, and the catalogue's black discs located at half their height.
+  for (const Rider rider : {Rider::kFlatBright, Rider::kCatalogueDisc}) {
+    SCOPED_TRACE(rider == Rider::kFlatBright ? "flat bright markers" : "black discs");
+    const auto samples =
+        belt_samples(belt_cam.truth.model, kWorldTBase.inverse() * belt_cam.truth.pose, rider);
+    ASSERT_GE(samples.size(), 15U);
+    auto r = calibrate_belt(samples, "belt1", "scara_picker");
+    ASSERT_THAT(r, IsOk());
+    EXPECT_NEAR(r->calibration.mm_per_count, kTrueMmPerCount,
+                kTrueMmPerCount * kScaleTolRel / 10)
+        << r->brief();
+    EXPECT_LT(direction_error_deg(r->calibration.direction), kDirectionTolDeg / 10) << r->brief();
+    EXPECT_LT(r->calibration.rms_mm, 0.05);
+    EXPECT_GT(r->calibration.holdout_mm, 0.0);
+    EXPECT_LT(r->calibration.holdout_mm, 0.1);
+    EXPECT_EQ(r->parts, 3);
+    std::cout << "true camera: " << r->brief() << "\n";
+  }
 }
 
 // From scratch: belt camera intrinsics from 20 board views, its pose in the picker's base by
@@ -237,6 +258,59 @@ TEST(BeltCalibrationFile, RoundTripsAndReportsErrorsWithLines) {
   cell_calibration_BeltCalibration broken = m;
   broken.direction = {0.0, 2.0, 0.0};
   EXPECT_THAT(from_idl(broken), IsErrWith(Errc::kInvalidArgument, "unit vector"));
+}
+
+// The cell's belt calibration: the catalogue's black discs (20 mm, 5 mm high, reflectance 0.1)
+// on the grey belt, the white table either side in the field (what belt_cam sees). One global
+// threshold splits table from belt, and the discs merge into the belt: nothing is found. Their
+// contrast to the local background (background_px) finds each, at its true place.
+TEST(Marker, FindsDarkDiscsOnTheGreyBeltBetweenWhiteTableTops) {
+  const render::CameraDescription belt_cam = testing::camera_file("belt_cam.yaml");
+  render::Scene scene = belt1_scene();
+  const std::vector<Eigen::Vector2d> places = {{1290.0, 150.0}, {1350.0, 80.0}, {1410.0, 20.0}};
+  for (std::size_t d = 0; d < places.size(); ++d) {
+    render::Part disc;
+    disc.id = fmt::format("disc{}", d);
+    disc.class_name = "disc";
+    disc.shape = render::Shape::kDisc;
+    disc.length_mm = 20.0;
+    disc.width_mm = 20.0;
+    disc.height_mm = 5.0;
+    disc.reflectance = 0.1;
+    disc.world_T_part =
+        Eigen::Isometry3d(Eigen::Translation3d(places[d].x(), places[d].y(), kBeltZ));
+    scene.parts.push_back(disc);
+  }
+  const cv::Mat image = testing::render_view(belt_cam.truth.model, belt_cam.lighting, scene,
+                                             belt_cam.truth.pose, 2.0, 5);
+  MarkerOptions global;
+  global.min_area_px = 800.0;
+  global.max_area_px = 4000.0;
+  auto merged = locate_markers(image, global);
+  ASSERT_THAT(merged, IsOk());
+  EXPECT_TRUE(merged->empty());
+  MarkerOptions local = global;
+  local.background_px = 81;
+  local.threshold = 20;
+  auto markers = locate_markers(image, local);
+  ASSERT_THAT(markers, IsOk());
+  ASSERT_EQ(markers->size(), places.size());
+  const Eigen::Isometry3d camera_T_world = belt_cam.truth.pose.inverse();
+  for (const Marker& m : *markers) {
+    EXPECT_FALSE(m.touches_border);
+    // The silhouette of a short cylinder seen from above: centred at half its height.
+    double nearest = 1e9;
+    for (const Eigen::Vector2d& xy : places) {
+      const auto truth =
+          belt_cam.truth.model.project(camera_T_world * Eigen::Vector3d(xy.x(), xy.y(), kBeltZ + 2.5));
+      ASSERT_TRUE(truth);
+      nearest = std::min(nearest, (m.centroid_px - *truth).norm());
+    }
+    EXPECT_LT(nearest, 0.1);
+  }
+  MarkerOptions even = local;
+  even.background_px = 80;
+  EXPECT_THAT(locate_markers(image, even), IsErrWith(Errc::kInvalidArgument, "odd side"));
 }
 
 TEST(Marker, LocatesABlobToAFractionOfAPixel) {

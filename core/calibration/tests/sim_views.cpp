@@ -249,6 +249,21 @@ BoardSpec board_9x6(double square_mm) {
   return b;
 }
 
+/// The first inverse-kinematics solution for `base_T_mount` within the robot's limits.
+std::optional<kinematics::JointVector> within_limits(const kinematics::RobotModel& robot,
+                                                    const Eigen::Isometry3d& base_T_mount) {
+  auto all = robot.inverse_all(base_T_mount);
+  if (!all) {
+    return std::nullopt;
+  }
+  for (const auto& sol : *all) {
+    if (sol.within_limits()) {
+      return sol.q;
+    }
+  }
+  return std::nullopt;
+}
+
 void add_sample(HandEyeScenario& s, const Eigen::Isometry3d& mount,
                 const kinematics::JointVector& q, BoardObservation obs, double rot_sigma,
                 double trans_sigma, bool yaw_only, std::mt19937_64& rng) {
@@ -265,6 +280,25 @@ void add_sample(HandEyeScenario& s, const Eigen::Isometry3d& mount,
 }
 
 }  // namespace
+
+std::vector<cv::Mat> intrinsics_images(const render::CameraDescription& camera,
+                                       const BoardSpec& board, double depth_mm,
+                                       std::uint64_t seed) {
+  std::vector<Eigen::Isometry3d> poses;
+  (void)intrinsics_views(camera, board, 20, depth_mm, 0.0, seed, &poses);
+  std::vector<cv::Mat> out;
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    render::Scene scene;
+    scene.table_height_mm = -5000.0;
+    scene.lights.fluorescent_on = false;
+    scene.targets.push_back(chessboard_target(board, poses[i]));
+    render::Lighting lighting = camera.lighting;
+    lighting.ambient = 0.7;
+    out.push_back(render_view(camera.truth.model, lighting, scene, Eigen::Isometry3d::Identity(),
+                              1.0, seed + i));
+  }
+  return out;
+}
 
 Eigen::Isometry3d noisy_pose(const Eigen::Isometry3d& pose_in, double rotation_sigma_deg,
                              double translation_sigma_mm, bool yaw_only, std::mt19937_64& rng) {
@@ -311,21 +345,11 @@ HandEyeScenario excalibur_eye_in_hand(int count, double rot_sigma, double trans_
     const Eigen::Isometry3d base_T_camera =
         pose(eye, looking_along(aim - eye, (-60.0 + 120.0 * unit(rng)) * kDegree));
     const Eigen::Isometry3d base_T_tool = base_T_camera * s.truth_extrinsics.inverse();
-    auto all = robot.inverse_all(base_T_tool);
-    if (!all) {
+    const std::optional<kinematics::JointVector> picked = within_limits(robot, base_T_tool);
+    if (!picked) {
       continue;
     }
-    const kinematics::IkSolution* pick = nullptr;
-    for (const auto& sol : *all) {
-      if (sol.within_limits()) {
-        pick = &sol;
-        break;
-      }
-    }
-    if (pick == nullptr) {
-      continue;
-    }
-    const Eigen::Isometry3d mount = robot.forward(pick->q).value();
+    const Eigen::Isometry3d mount = robot.forward(*picked).value();
     const Eigen::Isometry3d world_T_camera = mount * s.truth_extrinsics;
     if (!board_in_view(s.camera, world_T_camera.inverse() * s.truth_target, s.board, 10.0)) {
       continue;
@@ -333,7 +357,7 @@ HandEyeScenario excalibur_eye_in_hand(int count, double rot_sigma, double trans_
     auto obs = observe(s.camera, s.board, s.truth_target, world_T_camera, 0.0, 0.3, pixel_sigma,
                        seed + static_cast<std::uint64_t>(attempt), rng);
     if (obs) {
-      add_sample(s, mount, pick->q, std::move(*obs), rot_sigma, trans_sigma, false, rng);
+      add_sample(s, mount, *picked, std::move(*obs), rot_sigma, trans_sigma, false, rng);
     }
   }
   EXPECT_EQ(static_cast<int>(s.samples.size()), count) << s.name;
@@ -414,21 +438,11 @@ HandEyeScenario picker_eye_to_hand(int count, double rot_sigma, double trans_sig
     const double yaw = (-120.0 + 240.0 * unit(rng)) * kDegree;
     const Eigen::Isometry3d want =
         pose({x, y, z}, Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix());
-    auto all = robot.inverse_all(want);
-    if (!all) {
+    const std::optional<kinematics::JointVector> picked = within_limits(robot, want);
+    if (!picked) {
       continue;
     }
-    const kinematics::IkSolution* pick = nullptr;
-    for (const auto& sol : *all) {
-      if (sol.within_limits()) {
-        pick = &sol;
-        break;
-      }
-    }
-    if (pick == nullptr) {
-      continue;
-    }
-    const Eigen::Isometry3d mount = robot.forward(pick->q).value();
+    const Eigen::Isometry3d mount = robot.forward(*picked).value();
     const Eigen::Isometry3d world_T_board = world_T_base * mount * s.truth_target;
     if (!board_in_view(s.camera, camera.truth.pose.inverse() * world_T_board, s.board, 10.0)) {
       continue;
@@ -436,7 +450,7 @@ HandEyeScenario picker_eye_to_hand(int count, double rot_sigma, double trans_sig
     auto obs = observe(s.camera, s.board, world_T_board, camera.truth.pose, 760.0, 0.3,
                        pixel_sigma, seed + static_cast<std::uint64_t>(attempt), rng);
     if (obs) {
-      add_sample(s, mount, pick->q, std::move(*obs), rot_sigma, trans_sigma, true, rng);
+      add_sample(s, mount, *picked, std::move(*obs), rot_sigma, trans_sigma, true, rng);
     }
   }
   EXPECT_EQ(static_cast<int>(s.samples.size()), count) << s.name;
@@ -472,21 +486,11 @@ HandEyeScenario excalibur_eye_to_hand(int count, double rot_sigma, double trans_
     const Eigen::Isometry3d world_T_board =
         pose(centre - r_board * Eigen::Vector3d(100.0, 70.0, 0.0), r_board);
     const Eigen::Isometry3d base_T_tool = world_T_board * s.truth_target.inverse();
-    auto all = robot.inverse_all(base_T_tool);
-    if (!all) {
+    const std::optional<kinematics::JointVector> picked = within_limits(robot, base_T_tool);
+    if (!picked) {
       continue;
     }
-    const kinematics::IkSolution* pick = nullptr;
-    for (const auto& sol : *all) {
-      if (sol.within_limits()) {
-        pick = &sol;
-        break;
-      }
-    }
-    if (pick == nullptr) {
-      continue;
-    }
-    const Eigen::Isometry3d mount = robot.forward(pick->q).value();
+    const Eigen::Isometry3d mount = robot.forward(*picked).value();
     if (!board_in_view(s.camera, s.truth_extrinsics.inverse() * mount * s.truth_target, s.board,
                        10.0)) {
       continue;
@@ -494,7 +498,7 @@ HandEyeScenario excalibur_eye_to_hand(int count, double rot_sigma, double trans_
     auto obs = observe(s.camera, s.board, mount * s.truth_target, s.truth_extrinsics, -200.0, 0.4,
                        pixel_sigma, seed + static_cast<std::uint64_t>(attempt), rng);
     if (obs) {
-      add_sample(s, mount, pick->q, std::move(*obs), rot_sigma, trans_sigma, false, rng);
+      add_sample(s, mount, *picked, std::move(*obs), rot_sigma, trans_sigma, false, rng);
     }
   }
   EXPECT_EQ(static_cast<int>(s.samples.size()), count) << s.name;

@@ -43,6 +43,14 @@ cv::Mat render_view(const render::CameraModel& camera, const render::Lighting& l
 /// Adds isotropic Gaussian noise of `sigma_px` per coordinate to every corner.
 void add_corner_noise(BoardObservation& obs, double sigma_px, std::mt19937_64& rng);
 
+/// What an operator's board images are: 20 views of the board (intrinsics_views' poses for
+/// `seed`, no corner noise) rendered through the camera's TRUE model with 1 grey level of noise,
+/// the board on a dark background in an evenly lit room. Write them out for `cellctl calibrate
+/// intrinsics --images DIR`.
+std::vector<cv::Mat> intrinsics_images(const render::CameraDescription& camera,
+                                       const BoardSpec& board, double depth_mm,
+                                       std::uint64_t seed = 7);
+
 /// `count` views of a board held in front of a fixed camera (an operator waving it), spread
 /// over the field with tilts up to about 40 degrees, depth around `depth_mm`; rendered through
 /// the camera's TRUE model, detected, and `corner_noise_px` added. Fails the test when a view

@@ -435,6 +435,8 @@ Result<CalibrationConfig> load_config(const config::Document& doc) {
       m.optional("bright", p.marker.bright);
       m.optional("min_area_px", p.marker.min_area_px);
       m.optional("max_area_px", p.marker.max_area_px);
+      m.optional("threshold", p.marker.threshold);
+      m.optional("background_px", p.marker.background_px);
       m.optional("height_mm", p.marker_height_mm);
       if (auto s = p.marker.validate(); !s) {
         m.fail("", s.error().message);

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <map>
 #include <numbers>
+#include <optional>
 
 #include <fmt/format.h>
 #include <opencv2/imgcodecs.hpp>
@@ -252,6 +253,11 @@ Result<Procedures::Capture> Procedures::load_data_set(const std::string& dir,
     r.required("target_z_mm", z);
     out.target_z_mm = z;
   }
+  if (r.has("target_level")) {
+    bool level = true;
+    r.required("target_level", level);
+    out.target_level = level;
+  }
   std::size_t k = 0;
   for (const YAML::Node& node : r.sequence("samples", true)) {
     config::MapReader s = r.element(node, "samples[]");
@@ -392,6 +398,10 @@ Result<Outcome> Procedures::hand_eye(const Request& req) {
   }
   if (capture->target_z_mm) {
     options.planar_target_z_mm = *capture->target_z_mm;
+  }
+  if (capture->target_level) {
+    // A board skewed on its holder, taken for level, biases the camera by millimetres.
+    options.planar_target_level = *capture->target_level;
   }
   progress("solve", 0, 0, fmt::format("{} samples", capture->samples.size()));
   auto report = cal::calibrate_hand_eye(capture->samples, *model, options, progress_);
@@ -562,12 +572,21 @@ Result<Outcome> Procedures::belt(const Request& req) {
     ~Restore() { self->sim_restore(sim); }
   } restore{this, proc->sim};
   const double plane = entry->surface_z_mm + proc->marker_height_mm / 2.0;
+  // Tracks: one a marker. Every marker rides the same belt, so once any track has moved, its
+  // travel per count predicts where every other track is at a later count; until then a
+  // detection joins the nearest track within the gate.
   struct Track {
     Eigen::Vector3d last;
     std::int64_t count = 0;
     int samples = 0;
   };
   std::vector<Track> tracks;
+  std::optional<Eigen::Vector3d> mm_per_count_vector;  // the belt's travel per count, once seen
+  const auto predicted = [&](const Track& t, std::int64_t count) -> Eigen::Vector3d {
+    return mm_per_count_vector ? Eigen::Vector3d(t.last + *mm_per_count_vector *
+                                                              static_cast<double>(count - t.count))
+                               : t.last;
+  };
   std::vector<cal::BeltObservation> samples;
   const auto t0 = std::chrono::steady_clock::now();
   int frames = 0;
@@ -596,11 +615,14 @@ Result<Outcome> Procedures::belt(const Request& req) {
       if (!p) {
         continue;
       }
-      // Nearest track whose last sample is within the gate plus what the belt could have moved.
+      // The nearest track to the detection, at its predicted place, within the gate.
       int best = -1;
       double best_d = proc->track_gate_mm;
       for (std::size_t t = 0; t < tracks.size(); ++t) {
-        const double d = (tracks[t].last - *p).norm();
+        if (tracks[t].count == frame->belt_count) {
+          continue;  // already has its detection in this frame
+        }
+        const double d = (predicted(tracks[t], frame->belt_count) - *p).norm();
         if (d < best_d) {
           best_d = d;
           best = static_cast<int>(t);
@@ -611,6 +633,9 @@ Result<Outcome> Procedures::belt(const Request& req) {
         best = static_cast<int>(tracks.size()) - 1;
       }
       Track& t = tracks[static_cast<std::size_t>(best)];
+      if (t.samples > 0 && frame->belt_count != t.count) {
+        mm_per_count_vector = (*p - t.last) / static_cast<double>(frame->belt_count - t.count);
+      }
       t.last = *p;
       t.count = frame->belt_count;
       ++t.samples;

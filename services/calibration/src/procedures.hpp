@@ -72,6 +72,7 @@ class Procedures {
     std::vector<calibration::HandEyeSample> samples;
     std::vector<kinematics::JointVector> joints;
     std::optional<double> target_z_mm;  ///< a data set's target height (planar reduction)
+    std::optional<bool> target_level;   ///< and whether its face is level (planar reduction)
   };
   Result<Capture> capture_board(const BoardCapture& capture, const SimSetup& sim,
                                 const calibration::CameraCalibration& camera,

@@ -112,7 +112,7 @@ Result<CameraCalibration> parse_camera_calibration(const std::string& text,
 std::string format_camera_calibration(const CameraCalibration& calibration);
 
 /// Writes the file atomically (temporary file, then rename). Errors: kInvalidArgument from
-/// validate(), kConfig when the file cannot be written (naming the path and errno's text).
+/// validate(), kIo when the file cannot be written (naming the path and errno's text).
 Status save_camera_calibration(const CameraCalibration& calibration, const std::string& path);
 
 /// The calibration the cell starts from before anything was calibrated: the camera file's
