@@ -10,6 +10,7 @@
 #include <sqlite3.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
 #include <numeric>
 
@@ -101,12 +102,22 @@ class TaskBench : public TaskCellTest {
       }
     }
     r.latency = exposure_to_track(dir_ + "/journal.sqlite", id);
+    std::map<std::string, int> why;
+    for (const json& p : status.value("parts", json::array())) {
+      const std::string d = p.value("detail", "");
+      if (!d.empty()) {
+        ++why[d.substr(0, 100)];
+      }
+    }
+    for (const auto& [d, n] : why) {
+      std::printf("task_bench: %s: %d x %s\n", id.c_str(), n, d.c_str());
+    }
     return r;
   }
 };
 
 TEST_F(TaskBench, Table) {
-  start_cell("config/scenes/table_ics.yaml");
+  start_cell(cell::testing::source_dir() + "/config/scenes/table_ics.yaml");
   ASSERT_FALSE(HasFailure());
   (void)child("calibration")->stop(10s);
   store_truth_calibration("ibm7545_eye", "", Eigen::Isometry3d::Identity(), -231.51);
@@ -137,6 +148,14 @@ TEST_F(TaskBench, Table) {
       const auto t0 = std::chrono::steady_clock::now();
       auto reply = requester.call(r, 5s);
       const auto t1 = std::chrono::steady_clock::now();
+      if (!reply || reply->get().state == cell_task_JOB_REJECTED) {
+        std::printf("task_bench: submission %d refused: %s\n", i,
+                    reply ? (bus::span(reply->get().reasons).empty()
+                                 ? "(no reason)"
+                                 : bus::str(bus::span(reply->get().reasons)[0]))
+                                .data()
+                          : reply.error().message.c_str());
+      }
       if (reply && reply->get().state != cell_task_JOB_REJECTED && i > 0) {  // 0: discovery
         accept.v.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
       }
@@ -144,6 +163,8 @@ TEST_F(TaskBench, Table) {
     }
   }
 
+  // A cancel stops the robot at once (STOPPED until reset, as after any stop).
+  (void)cellctl({"robot", "reset", "--robot", "scara_picker"});
   // The table job.
   (void)cellctl({"world", "reset"});
   const auto t0 = std::chrono::steady_clock::now();
@@ -162,8 +183,9 @@ TEST_F(TaskBench, Table) {
   runs.push_back(belt_run("belt-05-2", 500, 2.0, d, conveyor));
   if (!g_quick) {
     runs.push_back(belt_run("belt-05-12", 500, 1.2, d, conveyor));
-    runs.push_back(belt_run("belt-20-2", 2000, 2.0, d, conveyor));
   }
+  runs.push_back(belt_run("belt-20-2", 2000, 2.0, d,
+                          cell::testing::source_dir() + "/config/jobs/conveyor_ics_fast.yaml"));
 
   std::printf("\ntask_bench: the task service on the simulated cell (ideal gateways, truth "
               "calibrations)\n\n");
@@ -197,6 +219,11 @@ int main(int argc, char** argv) {
       cell::task_test::g_quick = true;
     }
   }
+  // The checkout and the binaries this bench was built from, unless the caller says otherwise.
+  setenv("CELL_SOURCE_DIR", CELL_BENCH_SOURCE_DIR, 0);
+  setenv("CELL_BIN_DIR", CELL_BENCH_BIN_DIR, 0);
+  // This process's own participant (the submissions) on the cell's loopback configuration.
+  setenv("CYCLONEDDS_URI", "file://" CELL_BENCH_SOURCE_DIR "/config/dds/loopback.xml", 0);
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();
 }

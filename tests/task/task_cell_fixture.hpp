@@ -250,19 +250,10 @@ class TaskCellTest : public TaskCell {
     board.rows = 12;
     board.square_mm = 6.0;
     const render::CameraDescription camera = cal::testing::camera_file("ibm7545_eye.yaml");
-    std::vector<Eigen::Isometry3d> poses;
-    (void)cal::testing::intrinsics_views(camera, board, 20, 420.0, 0.0, 7, &poses);
+    const std::vector<cv::Mat> images = cal::testing::intrinsics_images(camera, board, 420.0);
     std::filesystem::create_directories(dir_ + "/board");
-    for (std::size_t i = 0; i < poses.size(); ++i) {
-      render::Scene scene;
-      scene.table_height_mm = -5000.0;
-      scene.lights.fluorescent_on = false;
-      scene.targets.push_back(cal::testing::chessboard_target(board, poses[i]));
-      render::Lighting lighting = camera.lighting;
-      lighting.ambient = 0.7;
-      const cv::Mat image = cal::testing::render_view(camera.truth.model, lighting, scene,
-                                                      Eigen::Isometry3d::Identity(), 1.0, 7 + i);
-      cv::imwrite(fmt::format("{}/board/view{:02d}.png", dir_, i), image);
+    for (std::size_t i = 0; i < images.size(); ++i) {
+      cv::imwrite(fmt::format("{}/board/view{:02d}.png", dir_, i), images[i]);
     }
     ToolRun r = cellctl({"calibrate", "intrinsics", "--camera", "ibm7545_eye", "--images",
                          dir_ + "/board", "--board", "17x12", "--square", "6"},

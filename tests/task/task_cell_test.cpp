@@ -116,7 +116,7 @@ TEST_F(TaskCellTest, ConveyorStreamAtHalfAMetrePerSecondIsPickedAndTheMissesAddU
 }
 
 TEST_F(TaskCellTest, KilledTwentyTimesTheTableJobStillPlacesEveryPartOnce) {
-  start_cell("config/scenes/table_ics.yaml");
+  start_cell(cell::testing::source_dir() + "/config/scenes/table_ics.yaml");
   ASSERT_FALSE(HasFailure());
   (void)child("calibration")->stop(10s);
   store_truth_calibration("ibm7545_eye", "", Eigen::Isometry3d::Identity(), -231.51);

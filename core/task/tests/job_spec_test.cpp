@@ -78,7 +78,7 @@ TEST(JobSpec, TheThesisJobParsesWithItsOutputColumn) {
 
 TEST(JobSpec, TheShippedExampleJobsParseAndCheck) {
   const Cell cell;
-  for (const char* name : {"table_ics.yaml", "conveyor_ics.yaml"}) {
+  for (const char* name : {"table_ics.yaml", "conveyor_ics.yaml", "conveyor_ics_fast.yaml"}) {
     std::ifstream f(cell::testing::source_dir() + "/config/jobs/" + name);
     const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
     auto job = parse_job_spec(text, name, cell.robots());
@@ -107,6 +107,38 @@ place:
   EXPECT_THAT(m, HasSubstr("speed_scale"));
   EXPECT_THAT(m, HasSubstr("colour"));
   EXPECT_THAT(m, HasSubstr("list, row, column or grid, got 'spiral'"));
+}
+
+TEST(JobSpec, LightsAndTheReadyPoseAreReadAndChecked) {
+  const Cell cell;
+  std::string text = kThesisJob;
+  text += "lights: both\n";
+  auto job = parse_job_spec(text, "job.yaml", cell.robots());
+  ASSERT_THAT(job, IsOk());
+  EXPECT_EQ(job->table()->lights, TablePickPlaceSpec::Lights::kBoth);
+  text.replace(text.find("lights: both"), 12, "lights: disco");
+  job = parse_job_spec(text, "job.yaml", cell.robots());
+  ASSERT_FALSE(job);
+  EXPECT_THAT(job.error().message, HasSubstr("keep, off, fluorescent, halogen or both, got 'disco'"));
+  // The conveyor's ready pose: two numbers, and reachable.
+  std::ifstream f(cell::testing::source_dir() + "/config/jobs/conveyor_ics.yaml");
+  std::string belt((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const auto at = belt.find("ready_mm: [350, 50]");
+  ASSERT_NE(at, std::string::npos);
+  auto conveyor = parse_job_spec(belt, "belt.yaml", cell.robots());
+  ASSERT_THAT(conveyor, IsOk());
+  ASSERT_TRUE(conveyor->conveyor()->ready_mm.has_value());
+  EXPECT_DOUBLE_EQ(conveyor->conveyor()->ready_mm->y(), 50.0);
+  std::string far = belt;
+  far.replace(at, 19, "ready_mm: [350, 900]");
+  conveyor = parse_job_spec(far, "belt.yaml", cell.robots());
+  ASSERT_THAT(conveyor, IsOk());
+  const Status s = check_job(*conveyor, cell.facts());
+  ASSERT_FALSE(s);
+  EXPECT_THAT(s.error().message, HasSubstr("ready_mm"));
+  std::string bad = belt;
+  bad.replace(at, 19, "ready_mm: [350]");
+  EXPECT_FALSE(parse_job_spec(bad, "belt.yaml", cell.robots()));
 }
 
 TEST(JobSpec, AnUnknownRobotOrKindIsNamed) {

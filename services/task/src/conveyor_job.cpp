@@ -420,10 +420,11 @@ class ConveyorJob {
     aim();  // the target is where lead_mm says, whatever pass ended the loop
     // The downstream limit before the robot moves (the chapter's downstr_lim): the meeting
     // point and the grip's end (following the part through the dwell) inside the window.
+    const double s_meet =
+        (Eigen::Vector3d(part.x_mm, part.y_mm, belt.nearest.z()) + belt.direction * lead_mm -
+         belt.nearest)
+            .dot(belt.direction);
     {
-      const Eigen::Vector3d meet = Eigen::Vector3d(part.x_mm, part.y_mm, belt.nearest.z()) +
-                                   belt.direction * lead_mm;
-      const double s_meet = (meet - belt.nearest).dot(belt.direction);
       const double s_end = s_meet + speed * spec_.dwell_s;
       if (s_end > spec_.downstream_mm || s_meet < spec_.upstream_mm) {
         run_.count("outside_window");
@@ -452,6 +453,7 @@ class ConveyorJob {
     const auto give_up = Clock::now() + std::chrono::milliseconds(static_cast<std::int64_t>(
                                             run_.config().motion_timeout_s * 1000));
     bool part_met = false;  // the part has reached the meeting point: ALTER follows it
+    bool escaped = false;   // the part went past the window before it was gripped
     const auto send_alter = [&] {
       const RobotView v = run_.links().robot(robot_id);
       if (!v.trajectory_id.empty()) {
@@ -459,12 +461,21 @@ class ConveyorJob {
       }
       if (!trajectory_id.empty()) {
         if (const auto latest = run_.links().belt(spec_.belt); latest) {
-          const Eigen::Vector3d c = shift_at(latest->count) - lead;
+          Eigen::Vector3d c = shift_at(latest->count) - lead;
+          // Never past the window's downstream limit: there the part escapes (the arm holds
+          // at the limit and this part is counted outside the window).
+          if (s_meet + c.dot(belt.direction) > spec_.downstream_mm) {
+            c = belt.direction * std::max(0.0, spec_.downstream_mm - s_meet);
+            escaped = true;
+          }
           const bool met = c.dot(belt.direction) > 0.0;
           part_met = part_met || met;
+          // The rate only while following: held at the limit (or waiting), the gateway must
+          // not extrapolate the correction further.
           (void)run_.links().alter(robot_id, trajectory_id, ++cycle,
                                    met ? c : Eigen::Vector3d::Zero(),
-                                   met ? v_belt : Eigen::Vector3d::Zero(), latest->stamp_ns);
+                                   met && !escaped ? v_belt : Eigen::Vector3d::Zero(),
+                                   latest->stamp_ns);
         }
       }
       pump_eye();
@@ -477,9 +488,13 @@ class ConveyorJob {
         stop_robot();
         return stop_if(interrupt_of(run_.control()));
       }
-      if (Clock::now() > give_up) {
+      if (Clock::now() > give_up || escaped) {
         stop_robot();
-        return ExecResult::failed("tracking motion did not end in time");
+        run_.count(escaped ? "outside_window" : "motion_failed");
+        record(part, escaped ? cell_task_PART_SKIPPED_OUTSIDE_WINDOW : cell_task_PART_MISSED,
+               escaped ? "the part left the window before the arm reached it"
+                       : "the tracking motion did not end in time");
+        return recover_after_stop();
       }
       if (auto u = run_.links().poll_motion(*sent); u) {
         if (accepted_ns == 0 && u->state != cell_motion_MOTION_REFUSED) {
@@ -507,6 +522,14 @@ class ConveyorJob {
         return stop_if(interrupt_of(run_.control()));
       }
       send_alter();
+    }
+    if (!part_met || escaped) {
+      stop_robot();
+      run_.count(escaped ? "outside_window" : "motion_failed");
+      record(part, escaped ? cell_task_PART_SKIPPED_OUTSIDE_WINDOW : cell_task_PART_MISSED,
+             escaped ? "the part left the window before the arm reached it"
+                     : "the part did not reach the meeting point in time");
+      return recover_after_stop();
     }
     send_alter();  // one correction past the meeting point, so the arm moves with the part
     if (const auto latest = run_.links().belt(spec_.belt); latest) {

@@ -135,9 +135,20 @@ class TableJob {
     }
     while (p["phase"] == "windows") {
       const int w = p["window"].get<int>();
-      if (w >= static_cast<int>(spec_.windows.size()) || p["free_slots"].empty()) {
+      if (w >= static_cast<int>(spec_.windows.size())) {
         p["phase"] = "home";
         break;
+      }
+      // Every slot taken: one more look at the window all the same, since a grasp that
+      // closed on nothing leaves its part there and gives its slot back.
+      if (p["free_slots"].empty()) {
+        if (p.value("verified_full", false)) {
+          p["phase"] = "home";
+          break;
+        }
+        p["verified_full"] = true;
+      } else {
+        p["verified_full"] = false;
       }
       if (auto r = visit_window(w); r) {
         return *r;
