@@ -177,11 +177,14 @@ Status Servo::post_command(cell_robot_RobotCommandKind kind, const CommandArgs& 
         return ok_status();  // nothing to reset: harmless
       }
       break;
+    case cell_robot_CMD_HOME:
     case cell_robot_CMD_GRIPPER_OPEN:
-    case cell_robot_CMD_GRIPPER_CLOSE:
+    case cell_robot_CMD_GRIPPER_CLOSE: {
       // Tracking (arrived, following a belt with ALTER) is where a conveyor pick closes its
       // gripper (digest 002 §2.4: grip while tracking, ALTER off after).
-      if (moving && !(snapshot_.tracking && !pending_.plan.has_value())) {
+      const bool gripping_while_tracking = kind != cell_robot_CMD_HOME && snapshot_.tracking &&
+                                           !pending_.plan.has_value();
+      if (moving && !gripping_while_tracking) {
         return Error{Errc::kNotReady,
                      fmt::format("cannot {} while the robot moves", command_name(kind))};
       }
@@ -190,16 +193,7 @@ Status Servo::post_command(cell_robot_RobotCommandKind kind, const CommandArgs& 
                                                   command_name(kind), snapshot_.fault_text)};
       }
       break;
-    case cell_robot_CMD_HOME:
-      if (moving) {
-        return Error{Errc::kNotReady,
-                     fmt::format("cannot {} while the robot moves", command_name(kind))};
-      }
-      if (snapshot_.mode == cell_robot_MODE_FAULT) {
-        return Error{Errc::kNotReady, fmt::format("cannot {}: robot is in fault ({})",
-                                                  command_name(kind), snapshot_.fault_text)};
-      }
-      break;
+    }
     case cell_robot_CMD_SET_GAINS:
       if (static_cast<int>(args.kp.size()) != model_.dof() ||
           static_cast<int>(args.kv.size()) != model_.dof()) {

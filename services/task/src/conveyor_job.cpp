@@ -454,6 +454,14 @@ class ConveyorJob {
                                             run_.config().motion_timeout_s * 1000));
     bool part_met = false;  // the part has reached the meeting point: ALTER follows it
     bool escaped = false;   // the part went past the window before it was gripped
+    // This part is not taken: it escaped the window, or `why`. Stop, count, go on.
+    const auto let_go = [&](const char* why) {
+      stop_robot();
+      run_.count(escaped ? "outside_window" : "motion_failed");
+      record(part, escaped ? cell_task_PART_SKIPPED_OUTSIDE_WINDOW : cell_task_PART_MISSED,
+             escaped ? "the part left the window before the arm reached it" : why);
+      return recover_after_stop();
+    };
     const auto send_alter = [&] {
       const RobotView v = run_.links().robot(robot_id);
       if (!v.trajectory_id.empty()) {
@@ -489,12 +497,7 @@ class ConveyorJob {
         return stop_if(interrupt_of(run_.control()));
       }
       if (Clock::now() > give_up || escaped) {
-        stop_robot();
-        run_.count(escaped ? "outside_window" : "motion_failed");
-        record(part, escaped ? cell_task_PART_SKIPPED_OUTSIDE_WINDOW : cell_task_PART_MISSED,
-               escaped ? "the part left the window before the arm reached it"
-                       : "the tracking motion did not end in time");
-        return recover_after_stop();
+        return let_go("the tracking motion did not end in time");
       }
       if (auto u = run_.links().poll_motion(*sent); u) {
         if (accepted_ns == 0 && u->state != cell_motion_MOTION_REFUSED) {
@@ -524,12 +527,7 @@ class ConveyorJob {
       send_alter();
     }
     if (!part_met || escaped) {
-      stop_robot();
-      run_.count(escaped ? "outside_window" : "motion_failed");
-      record(part, escaped ? cell_task_PART_SKIPPED_OUTSIDE_WINDOW : cell_task_PART_MISSED,
-             escaped ? "the part left the window before the arm reached it"
-                     : "the part did not reach the meeting point in time");
-      return recover_after_stop();
+      return let_go("the part did not reach the meeting point in time");
     }
     send_alter();  // one correction past the meeting point, so the arm moves with the part
     if (const auto latest = run_.links().belt(spec_.belt); latest) {
