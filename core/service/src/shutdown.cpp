@@ -44,7 +44,7 @@ void ShutdownSignal::loop() {
     if (sig == SIGUSR2) {
       return;
     }
-    if (requested_.exchange(true)) {
+    if (stopping_.exchange(true)) {
       // Second signal while stopping: the operator insists. Leave now.
       std::fprintf(stderr, "second signal %d while stopping: exiting at once\n", sig);
       std::_Exit(128 + sig);
@@ -60,6 +60,9 @@ void ShutdownSignal::fire() {
   for (auto& [handle, callback] : callbacks_) {
     callback();
   }
+  // Set under the lock after the callbacks: whoever sees requested() sees their effects, and
+  // on_stop() either lands in the list before fire() or sees requested_ and calls at once.
+  requested_ = true;
 }
 
 int ShutdownSignal::on_stop(std::function<void()> callback) {
@@ -78,7 +81,7 @@ void ShutdownSignal::remove(int handle) {
 }
 
 void ShutdownSignal::request() {
-  if (!requested_.exchange(true)) {
+  if (!stopping_.exchange(true)) {
     fire();
   }
 }

@@ -29,6 +29,7 @@ class ShutdownSignal {
   /// Requests a stop as if a signal had arrived (tests, fatal errors).
   void request();
 
+  /// True once a stop was requested AND every callback registered by then has run.
   bool requested() const noexcept { return requested_.load(); }
 
   /// The signal number that requested the stop (0 when request() did).
@@ -38,7 +39,8 @@ class ShutdownSignal {
   void loop();
   void fire();
 
-  std::atomic<bool> requested_{false};
+  std::atomic<bool> stopping_{false};   // first request taken (guards against a second)
+  std::atomic<bool> requested_{false};  // set under mutex_ after the callbacks ran
   std::atomic<int> signal_{0};
   std::mutex mutex_;
   std::vector<std::pair<int, std::function<void()>>> callbacks_;
