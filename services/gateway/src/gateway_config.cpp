@@ -18,6 +18,12 @@ Result<GatewayConfig> load_config(const config::Document& doc) {
   root.optional("realtime_priority", c.realtime_priority);
   root.optional_deg("start_tolerance_deg", c.start_tolerance_rad);
   root.optional("start_tolerance_mm", c.start_tolerance_mm);
+  root.optional("supervisors", c.supervisors);
+  for (std::size_t i = 0; i < c.supervisors.size(); ++i) {
+    if (c.supervisors[i].empty()) {
+      root.fail("supervisors", fmt::format("entry {} is empty: list service ids, e.g. [task]", i));
+    }
+  }
   config::MapReader driver = root.child("driver");
   driver.required("kind", c.driver_kind);
   if (const DriverParser parse = find_driver(c.driver_kind); parse != nullptr) {

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "cell/bus/view.hpp"
 #include "cell/common/log.hpp"
@@ -63,6 +64,9 @@ GatewayService::GatewayService(service::Context& ctx, const GatewayConfig& confi
   if (auto s = servo_->start(Clock::now()); !s) {
     throw std::runtime_error(fmt::format("driver '{}' failed to start: {}", config_.driver_kind,
                                          s.error().message));
+  }
+  if (!config_.supervisors.empty()) {
+    directory_.emplace(ctx.participant(), ctx.common().service_id + ".supervisors");
   }
   publisher_thread_ = std::thread([this] { publisher_loop(); });
   servo_thread_ = std::thread([this] { servo_loop(); });
@@ -165,6 +169,7 @@ void GatewayService::publish_state(const ServoSnapshot& s,
   m.fluorescent_on = s.fluorescent_on;
   m.fault_bits = s.fault_bits;
   m.fault_text = bus::borrow(s.fault_text);
+  m.stop_code = bus::borrow(s.stop_code);
   m.trajectory_id = bus::borrow(s.trajectory_id);
   m.trajectory_progress = s.progress;
   m.tracking = s.tracking;
@@ -257,6 +262,49 @@ void GatewayService::handle_alter(const cell_motion_AlterCorrection& message) {
   servo_->post_alter(c, stamp, std::string(bus::str(message.trajectory_id)));
 }
 
+void GatewayService::watch_supervisors(const ServoSnapshot& snapshot) {
+  if (!directory_) {
+    return;
+  }
+  auto entries = directory_->snapshot();
+  if (!entries) {
+    log::warn("supervisor", "cannot read heartbeats", {{"error", entries.error().message}});
+    return;
+  }
+  // Lost: the heartbeat's liveliness lapsed (killed, hung or cut off by a partition). A
+  // supervisor that never appeared, or stopped cleanly, is not lost: a gateway without a
+  // running task service is driven by hand as before.
+  std::vector<std::string> lost;
+  for (const std::string& id : config_.supervisors) {
+    for (const service::ServiceEntry& e : *entries) {
+      if (e.service_id == id && e.lost) {
+        lost.push_back(id);
+      }
+    }
+  }
+  if (lost.size() < config_.supervisors.size()) {
+    if (supervisors_lost_) {
+      log::info("supervisor", "a supervisor is back", {{"robot", model_.id()}});
+    }
+    supervisors_lost_ = false;
+    return;
+  }
+  // One stop per loss: once the robot was stopped (and perhaps reset and moved by an
+  // operator), it is not stopped again until a supervisor came back and was lost again.
+  if (supervisors_lost_ || !(snapshot.moving || snapshot.tracking)) {
+    return;
+  }
+  supervisors_lost_ = true;
+  const std::string names = fmt::format("'{}'", fmt::join(lost, "', '"));
+  const std::string text = fmt::format("stopped: supervisor {} lost", names);
+  servo_->post_stop("supervisor_lost", text);
+  log::warn("supervisor", "every supervisor lost while the robot moves: stopping it",
+            {{"robot", model_.id()}, {"supervisors", names},
+             {"trajectory", snapshot.trajectory_id}});
+  ctx_.events().publish(cell_health_SEVERITY_WARNING, "gateway.supervisor_lost",
+                        fmt::format("robot '{}' {}", model_.id(), text), model_.id());
+}
+
 void GatewayService::run(service::Context& ctx) {
   bus::WaitSet waitset(ctx.participant());
   waitset.attach(ctx.stop_guard().get(), kStop);
@@ -282,6 +330,7 @@ void GatewayService::run(service::Context& ctx) {
       ctx.events().publish(e.severity, e.code, e.text, model_.id());
     }
     const ServoSnapshot s = servo_->snapshot();
+    watch_supervisors(s);
     if (s.mode == cell_robot_MODE_FAULT) {
       ctx.health().set(cell_health_HEALTH_DEGRADED, "robot in fault: " + s.fault_text);
     } else {

@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -9,6 +10,7 @@
 #include "cell/bus/topic.hpp"
 #include "cell/bus/writer.hpp"
 #include "cell/kinematics/robot_model.hpp"
+#include "cell/service/directory.hpp"
 #include "cell/service/runtime.hpp"
 #include "gateway_config.hpp"
 #include "servo.hpp"
@@ -41,6 +43,8 @@ class GatewayService {
   void handle_command(const cell_robot_RobotCommand& message);
   void handle_alter(const cell_motion_AlterCorrection& message);
   void reply(const cell_common_RequestId& id, const Status& status);
+  /// Watches the supervisors' heartbeats; stops a moving robot when every one is lost.
+  void watch_supervisors(const ServoSnapshot& snapshot);
 
   service::Context& ctx_;
   GatewayConfig config_;
@@ -72,6 +76,10 @@ class GatewayService {
   std::thread publisher_thread_;
   std::thread servo_thread_;
   std::uint64_t state_seq_ = 0;
+
+  // Supervisor watch (main thread only).
+  std::optional<service::ServiceDirectory> directory_;
+  bool supervisors_lost_ = false;  ///< every supervisor lost, and the robot stopped for it once
 };
 
 }  // namespace cell::gateway

@@ -227,6 +227,12 @@ Status Servo::post_command(cell_robot_RobotCommandKind kind, const CommandArgs& 
   return ok_status();
 }
 
+void Servo::post_stop(std::string code, std::string text) {
+  std::lock_guard lock(mutex_);
+  pending_.stop_code = code.empty() ? std::string("command") : std::move(code);
+  pending_.stop_text = std::move(text);
+}
+
 void Servo::event(cell_health_Severity severity, std::string code, std::string text) {
   std::lock_guard lock(mutex_);
   if (events_out_.size() < 256) {
@@ -256,6 +262,8 @@ void Servo::apply_commands(
         events_.clear();
         if (mode_ != cell_robot_MODE_FAULT) {
           mode_ = cell_robot_MODE_STOPPED;
+          stop_code_ = "command";
+          stop_text_.clear();
         }
         event(cell_health_SEVERITY_WARNING, "robot.stopped",
               fmt::format("robot '{}' stopped on command", model_.id()));
@@ -269,6 +277,8 @@ void Servo::apply_commands(
           setpoint_.q = measured_.q;
           setpoint_.qd.setZero();
           mode_ = cell_robot_MODE_IDLE;
+          stop_code_.clear();
+          stop_text_.clear();
           event(cell_health_SEVERITY_INFO, "robot.reset",
                 fmt::format("robot '{}' reset", model_.id()));
         }
@@ -326,6 +336,16 @@ void Servo::cycle(Clock::time_point now) {
     std::swap(pending, pending_);
   }
   apply_commands(pending.commands);
+  if (!pending.stop_code.empty()) {
+    // The gateway's own stop (its supervisors were lost): exactly a STOP command's effect.
+    executor_.stop();
+    events_.clear();
+    if (mode_ != cell_robot_MODE_FAULT) {
+      mode_ = cell_robot_MODE_STOPPED;
+      stop_code_ = std::move(pending.stop_code);
+      stop_text_ = std::move(pending.stop_text);
+    }
+  }
   if (pending.plan && mode_ != cell_robot_MODE_FAULT && mode_ != cell_robot_MODE_STOPPED) {
     motion::Plan& plan = *pending.plan;
     events_ = std::move(plan.events);
@@ -408,8 +428,15 @@ void Servo::cycle(Clock::time_point now) {
   if (mode_ == cell_robot_MODE_FAULT && snapshot_.fault_text.empty()) {
     snapshot_.fault_text = measured_.fault_bits != 0 ? driver_->describe_faults(measured_.fault_bits)
                                                      : executor_.failure().message;
+  } else if (mode_ == cell_robot_MODE_STOPPED) {
+    snapshot_.fault_text = stop_text_;
   } else if (mode_ != cell_robot_MODE_FAULT) {
     snapshot_.fault_text.clear();
+  }
+  if (mode_ == cell_robot_MODE_STOPPED) {
+    snapshot_.stop_code = stop_code_;
+  } else {
+    snapshot_.stop_code.clear();
   }
   snapshot_.trajectory_id = trajectory_id_;
   snapshot_.progress = executor_.progress();

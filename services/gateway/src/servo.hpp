@@ -29,7 +29,8 @@ struct ServoSnapshot {
   bool halogen_on = false;
   bool fluorescent_on = false;
   std::uint32_t fault_bits = 0;
-  std::string fault_text;
+  std::string fault_text;  ///< FAULT: the fault's meaning; STOPPED: why, when the gateway knows
+  std::string stop_code;   ///< STOPPED: "command" or "supervisor_lost" (RobotState.stop_code)
   std::string trajectory_id;
   double progress = 0.0;
   bool tracking = false;  ///< ALTER on and arrived: following the moving destination
@@ -72,6 +73,11 @@ class Servo {
   /// Queues a command. STOP is always accepted and takes effect within one cycle.
   Status post_command(cell_robot_RobotCommandKind kind, const CommandArgs& args);
 
+  /// Stops the robot as a STOP command does (from the next cycle on, needs a RESET), with a
+  /// machine-readable `code` (RobotState.stop_code, e.g. "supervisor_lost") and the `text`
+  /// the state's fault_text carries while it is stopped. Always accepted; thread-safe.
+  void post_stop(std::string code, std::string text);
+
   /// One servo cycle at time `now`.
   void cycle(Clock::time_point now);
 
@@ -91,6 +97,8 @@ class Servo {
     std::optional<trajectory::AlterCorrection> alter;
     std::string alter_id;
     std::vector<std::pair<cell_robot_RobotCommandKind, CommandArgs>> commands;
+    std::string stop_code;  ///< post_stop: non-empty when the gateway stops the robot itself
+    std::string stop_text;
   };
 
   double seconds(Clock::time_point t) const;
@@ -117,6 +125,8 @@ class Servo {
   double hold_until_s_ = -1;
   std::string trajectory_id_;
   cell_robot_RobotMode mode_ = cell_robot_MODE_IDLE;
+  std::string stop_code_;  ///< why mode_ is STOPPED
+  std::string stop_text_;
   std::uint64_t cycle_ = 0;
   int retries_in_a_row_ = 0;
 

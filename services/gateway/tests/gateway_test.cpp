@@ -1,5 +1,8 @@
 #include "gateway_service.hpp"
 
+#include <csignal>
+#include <thread>
+
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -8,6 +11,7 @@
 #include "cell/bus/view.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/motion/planner.hpp"
+#include "cell/process/child.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
 #include "cell/testing/service_harness.hpp"
@@ -162,6 +166,146 @@ TEST_F(GatewayTest, AnswersEveryCommandAndIgnoresOtherRobots) {
   EXPECT_FALSE((*gains)->status.accepted);
   EXPECT_THAT(bus::str((*gains)->status.reason), ::testing::HasSubstr("not supported"));
   EXPECT_THAT(command(cell_robot_CMD_HOME, "excalibur"), ::cell::testing::IsErr(Errc::kTimeout));
+}
+
+// The supervisor watch: a heartbeat writer of another process (Cyclone leases only those),
+// here cell-echo under the id "task", killed while the robot moves: the gateway stops the
+// robot as a STOP command does and says why in a way the task service can recognise.
+TEST(GatewaySupervisor, StopsAMovingRobotWhenEverySupervisorIsLostAndSaysWhy) {
+  const std::uint32_t domain = cell::testing::test_domain_id();
+  const std::string partition = cell::testing::unique_partition();
+  GatewayConfig config = ideal_config();
+  config.supervisors = {"task"};
+  Harness gateway(domain, partition, config, "gateway");
+  bus::Participant client(domain, partition);
+  bus::Requester<cell_robot_RobotCommand, cell_robot_RobotCommandReply> commands(
+      client, bus::topics::kRobotCommand, bus::topics::kRobotCommandReply, "test");
+  bus::Requester<cell_motion_Trajectory, cell_robot_RobotCommandReply> trajectories(
+      client, bus::topics::kTrajectory, bus::topics::kRobotCommandReply, "test-t");
+  bus::Topic<cell_robot_RobotState> state_topic(client, bus::topics::kRobotState);
+  bus::Reader<cell_robot_RobotState> states(client, state_topic, bus::topics::kRobotState);
+  bus::Topic<cell_health_CellEvent> event_topic(client, bus::topics::kCellEvent);
+  bus::Reader<cell_health_CellEvent> events(client, event_topic, bus::topics::kCellEvent);
+  auto latest = [&] {
+    std::optional<bus::Owned<cell_robot_RobotState>> last;
+    const auto deadline = std::chrono::steady_clock::now() + 2s;
+    while (!last && std::chrono::steady_clock::now() < deadline) {
+      states.wait_for_data(100ms);
+      for (auto& s : *states.take_copies(64)) {
+        last = std::move(s);
+      }
+    }
+    return last;
+  };
+  auto command = [&](cell_robot_RobotCommandKind kind) {
+    cell_robot_RobotCommand c{};
+    c.robot_id = bus::borrow(std::string("ibm7545"));
+    c.kind = kind;
+    return commands.call(c, 5s);
+  };
+
+  process::SpawnOptions options;
+  options.executable = cell::testing::bin_path("cell-echo");
+  options.args = {"--id", "task", "--config", cell::testing::source_dir() + "/config/echo.yaml"};
+  options.env = cell::testing::bus_env(domain, partition);
+  auto supervisor = process::Child::spawn(options);
+  ASSERT_THAT(supervisor, ::cell::testing::IsOk());
+  service::ServiceDirectory directory(client, "test");
+  ASSERT_THAT(directory.wait_settled(10s, {"task", "gateway"}), ::cell::testing::IsOk());
+
+  auto home = command(cell_robot_CMD_HOME);
+  ASSERT_THAT(home, ::cell::testing::IsOk());
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        auto s = latest();
+        return s && (*s)->homed && (*s)->mode == cell_robot_MODE_IDLE;
+      },
+      10s));
+  auto state = latest();
+  ASSERT_TRUE(state.has_value());
+  trajectory::JointVector q0(4);
+  for (int j = 0; j < 4; ++j) {
+    q0[j] = bus::span((*state)->position_rad_or_mm)[static_cast<std::size_t>(j)];
+  }
+  trajectory::JointVector q1 = q0;
+  q1[2] = 150;  // Z down 150 mm, slowly: long enough to outlast the 3 s lease
+  const kinematics::RobotModel model = *kinematics::load_robot(config.robot_config);
+  motion::Planner planner(model, {});
+  auto plan = planner.move_joints(q0, q1, 0.02);
+  ASSERT_THAT(plan, ::cell::testing::IsOk());
+  ASSERT_GT(plan->trajectory.duration_s(), 12.0);
+  motion::TrajectoryWire wire;
+  motion::to_idl(*plan, "ibm7545", "slow", "m", wire);
+  auto reply = trajectories.call(wire.message, 5s);
+  ASSERT_THAT(reply, ::cell::testing::IsOk());
+  ASSERT_TRUE((*reply)->status.accepted) << bus::str((*reply)->status.reason);
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        auto s = latest();
+        return s && (*s)->moving;
+      },
+      5s));
+
+  const auto killed_at = std::chrono::steady_clock::now();
+  ASSERT_EQ(::kill(supervisor->pid(), SIGKILL), 0);
+  (void)supervisor->wait_for(5s);
+  std::optional<bus::Owned<cell_robot_RobotState>> stopped;
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        stopped = latest();
+        return stopped && (*stopped)->mode == cell_robot_MODE_STOPPED;
+      },
+      10s))
+      << "the robot must be stopped once its only supervisor is lost";
+  const double after_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - killed_at).count();
+  std::printf("stopped %.2f s after the supervisor was killed (lease 3 s)\n", after_s);
+  EXPECT_LT(after_s, 8.0);
+  EXPECT_EQ(bus::str((*stopped)->stop_code), "supervisor_lost");
+  EXPECT_EQ(bus::str((*stopped)->fault_text), "stopped: supervisor 'task' lost");
+  EXPECT_FALSE((*stopped)->moving);
+  const double z_at_stop = bus::span((*stopped)->position_rad_or_mm)[2];
+  EXPECT_LT(z_at_stop, 140.0) << "halted on the way, not at the end of the trajectory";
+  bool event_seen = false;
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        for (auto& e : *events.take_copies(64)) {
+          if (bus::str(e->code) == "gateway.supervisor_lost") {
+            event_seen = true;
+            EXPECT_EQ(e->severity, cell_health_SEVERITY_WARNING);
+            EXPECT_THAT(std::string(bus::str(e->text)), ::testing::HasSubstr("'task'"));
+          }
+        }
+        return event_seen;
+      },
+      5s));
+  // It holds where it stopped, and a RESET clears the reason.
+  std::this_thread::sleep_for(500ms);
+  auto held = latest();
+  ASSERT_TRUE(held.has_value());
+  EXPECT_EQ((*held)->mode, cell_robot_MODE_STOPPED);
+  EXPECT_NEAR(bus::span((*held)->position_rad_or_mm)[2], z_at_stop, 0.5);
+  auto reset = command(cell_robot_CMD_RESET);
+  ASSERT_THAT(reset, ::cell::testing::IsOk());
+  EXPECT_TRUE((*reset)->status.accepted);
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        auto s = latest();
+        return s && (*s)->mode == cell_robot_MODE_IDLE && bus::str((*s)->stop_code).empty() &&
+               bus::str((*s)->fault_text).empty();
+      },
+      5s));
+}
+
+TEST(GatewayConfig, SupervisorsAreServiceIdsAndNoneByDefault) {
+  auto doc = config::load_string(
+      "robot_config: x.yaml\nsupervisors: [task, '']\ndriver: {kind: ideal}\n", "g.yaml");
+  ASSERT_TRUE(doc);
+  auto config = load_config(*doc);
+  ASSERT_FALSE(config);
+  EXPECT_THAT(config.error().message, ::testing::HasSubstr("supervisors"));
+  EXPECT_THAT(config.error().message, ::testing::HasSubstr("entry 1 is empty"));
+  EXPECT_TRUE(ideal_config().supervisors.empty());
 }
 
 }  // namespace
