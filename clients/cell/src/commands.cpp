@@ -28,6 +28,7 @@
 #include "cell/common/time.hpp"
 #include "cell/common/version.hpp"
 #include "cell/service/directory.hpp"
+#include "deploy_gen.hpp"
 #include "profile.hpp"
 #include "run_dir.hpp"
 #include "supervisor.hpp"
@@ -51,13 +52,18 @@ void print_error(std::string_view message) {
 }
 
 /// The profile named on the command line (or the default) with environment overrides.
-Result<Profile> load(const std::string& option) {
+/// `--run-dir` wins over the profile's run_dir (relative to the working directory).
+Result<Profile> load(const std::string& option, const std::string& run_dir = {}) {
   const std::string path = option.empty() ? default_profile_path() : option;
   auto profile = load_profile(path);
   if (!profile) {
     return profile;
   }
   CELL_TRY(apply_environment(*profile));
+  if (!run_dir.empty()) {
+    std::error_code ec;
+    profile->run_dir = fs::absolute(run_dir, ec).lexically_normal().string();
+  }
   return profile;
 }
 
@@ -77,19 +83,26 @@ std::string profile_hint(const Profile& profile) {
 }
 
 std::string banner(const LaunchPlan& plan, pid_t pid, bool detached) {
-  const std::string hint = profile_hint(plan.profile);
+  std::string hint = profile_hint(plan.profile);
+  if (!plan.host.empty()) {
+    hint += " --host " + plan.host + " --run-dir " + plan.paths.dir;
+  }
   std::string text = fmt::format(
       "cell: supervisor pid {} runs {} service(s) of profile '{}' ({}){}\n"
       "  bus:    domain {}, partition '{}'\n"
       "  logs:   {}/<service>.log{}\n"
       "  status: {}/status.json\n"
       "  check:  cell status{}   |   cellctl ping --domain {} --partition {}\n"
-      "  stop:   cell down{}{}\n",
+      "  stop:   cell down{}{}\n"
+      "{}",
       pid, plan.services.size(), plan.profile.name, plan.profile.path,
       detached ? " in the background" : "", plan.profile.bus.domain_id, plan.profile.bus.partition,
       plan.paths.logs, detached ? fmt::format(" (supervisor: {})", plan.paths.supervisor_log) : "",
       plan.paths.dir, hint, plan.profile.bus.domain_id, plan.profile.bus.partition, hint,
-      detached ? "" : "   (or Ctrl-C)");
+      detached ? "" : "   (or Ctrl-C)",
+      plan.host.empty() ? ""
+                        : fmt::format("  host:   '{}' of the profile, DDS configuration {}\n",
+                                      plan.host, plan.dds_config));
   for (const auto& other : plan.not_here) {
     text += fmt::format("  not started on this host: {}\n", other);
   }
@@ -282,12 +295,17 @@ int run_up(const UpOptions& options) {
   sigprocmask(SIG_BLOCK, &set, nullptr);
   log::init("cell");
 
-  auto profile = load(options.profile);
+  auto profile = load(options.profile, options.run_dir);
   if (!profile) {
     print_error(profile.error().message);
     return kExitUsage;
   }
-  auto plan = make_plan(*profile, options.only, self_dir());
+  const auto host = select_host(*profile, options.host);
+  if (!host) {
+    print_error(host.error().message);
+    return kExitUsage;
+  }
+  auto plan = make_plan(*profile, options.only, self_dir(), *host);
   if (!plan) {
     print_error(plan.error().message);
     return kExitUsage;
@@ -303,6 +321,10 @@ int run_up(const UpOptions& options) {
                     *owner, plan->paths.dir, profile_hint(*profile)));
     return kExitFailure;
   }
+  if (auto written = write_dds_config(*plan); !written) {
+    print_error(written.error().message);
+    return kExitFailure;
+  }
   if (options.detach) {
     return detach_and_supervise(*plan);
   }
@@ -311,7 +333,7 @@ int run_up(const UpOptions& options) {
 
 int run_down(const DownOptions& options) {
   log::init("cell");
-  auto profile = load(options.profile);
+  auto profile = load(options.profile, options.run_dir);
   if (!profile) {
     print_error(profile.error().message);
     return kExitUsage;
@@ -371,7 +393,7 @@ int run_down(const DownOptions& options) {
 
 int run_status(const StatusOptions& options) {
   log::init("cell", log::Level::kWarn);
-  auto profile = load(options.profile);
+  auto profile = load(options.profile, options.run_dir);
   if (!profile) {
     print_error(profile.error().message);
     return kExitUsage;
@@ -385,13 +407,38 @@ int run_status(const StatusOptions& options) {
   }
 
   // The services were given the profile's Cyclone configuration: look with the same eyes.
-  const std::string dds_config = home_path(profile->bus.cyclonedds_config);
-  if (access(dds_config.c_str(), R_OK) != 0) {
-    print_error(fmt::format("{}: key 'bus.cyclonedds_config': cannot read '{}': {}", profile->path,
-                            dds_config, std::strerror(errno)));
+  const auto host = select_host(*profile, options.host);
+  if (!host) {
+    print_error(host.error().message);
     return kExitUsage;
   }
-  setenv("CYCLONEDDS_URI", ("file://" + dds_config).c_str(), 1);
+  std::string uri;
+  if (host->empty()) {
+    const std::string dds_config = home_path(profile->bus.cyclonedds_config);
+    if (access(dds_config.c_str(), R_OK) != 0) {
+      print_error(fmt::format("{}: key 'bus.cyclonedds_config': cannot read '{}': {}",
+                              profile->path, dds_config, std::strerror(errno)));
+      return kExitUsage;
+    }
+    uri = "file://" + dds_config;
+  } else {
+    const std::string dds_config = paths.dir + "/dds/" + *host + ".status.xml";
+    if (auto w = write_file_atomically(dds_config, host_dds_config(*profile, *host)); !w) {
+      print_error(w.error().message);
+      return kExitFailure;
+    }
+    uri = "file://" + dds_config;
+  }
+  if (profile->security.enabled) {
+    const std::string identity = home_path(profile->security.dir) + "/" + options.identity + ".xml";
+    if (access(identity.c_str(), R_OK) != 0) {
+      print_error(fmt::format("security is enabled in {} but identity '{}' cannot be read: {}",
+                              profile->path, identity, std::strerror(errno)));
+      return kExitUsage;
+    }
+    uri += ",file://" + identity;
+  }
+  setenv("CYCLONEDDS_URI", uri.c_str(), 1);
 
   std::set<std::string> expected;
   for (const auto& spec : profile->services) {
@@ -439,21 +486,21 @@ int run_status(const StatusOptions& options) {
         if (!local->reason.empty()) {
           why += ": " + local->reason;
         }
-      } else if (is_local_host(spec.host)) {
+      } else if (runs_on(spec, *host)) {
         why = supervisor ? "not started by the supervisor" : "supervisor not running";
       } else {
         why = "no heartbeat from host " + spec.host;
       }
       detail = detail.empty() ? why : detail + "; " + why;
     }
-    const std::string host = entry != nullptr           ? entry->host
-                             : is_local_host(spec.host) ? this_host()
-                                                        : spec.host;
+    const std::string where = entry != nullptr           ? entry->host
+                              : is_local_host(spec.host) ? this_host()
+                                                         : spec.host;
     const pid_t pid = entry != nullptr ? entry->pid : (local != nullptr ? local->pid : 0);
-    table.push_back({spec.name, host, pid > 0 ? std::to_string(pid) : "-", state,
+    table.push_back({spec.name, where, pid > 0 ? std::to_string(pid) : "-", state,
                      entry != nullptr ? format_duration(entry->uptime_s) : "-",
                      local != nullptr ? std::to_string(local->restarts) : "-", detail});
-    json row{{"name", spec.name}, {"host", host},     {"pid", pid},
+    json row{{"name", spec.name}, {"host", where},    {"pid", pid},
              {"state", state},    {"detail", detail}, {"in_profile", true}};
     row["uptime_s"] = entry != nullptr ? json(entry->uptime_s) : json(nullptr);
     row["restarts"] = local != nullptr ? json(local->restarts) : json(nullptr);
@@ -505,6 +552,96 @@ int run_status(const StatusOptions& options) {
   return all_serving ? kExitOk : kExitFailure;
 }
 
+namespace {
+
+/// The plan of one host of a multi-host profile, for the generators.
+Result<LaunchPlan> host_plan(const GenerateOptions& options) {
+  auto profile = load(options.profile, options.run_dir);
+  if (!profile) {
+    return std::move(profile).error();
+  }
+  auto host = select_host(*profile, options.host);
+  if (!host) {
+    return std::move(host).error();
+  }
+  if (host->empty()) {
+    return Error{Errc::kConfig,
+                 fmt::format("{}: has no `hosts:` section: its services use {} as it is",
+                             profile->path, profile->bus.cyclonedds_config)};
+  }
+  return make_plan(*profile, {}, self_dir(), *host);
+}
+
+}  // namespace
+
+int run_dds_config(const GenerateOptions& options) {
+  log::init("cell", log::Level::kWarn);
+  auto plan = host_plan(options);
+  if (!plan) {
+    print_error(plan.error().message);
+    return kExitUsage;
+  }
+  std::cout << plan->dds_config_text;
+  return kExitOk;
+}
+
+int run_systemd(const GenerateOptions& options) {
+  log::init("cell", log::Level::kWarn);
+  auto plan = host_plan(options);
+  if (!plan) {
+    print_error(plan.error().message);
+    return kExitUsage;
+  }
+  const std::string out = options.install ? "/etc/systemd/system" : options.out;
+  if (out.empty()) {
+    print_error("cell systemd: say where the units go: --out DIR, or --install");
+    return kExitUsage;
+  }
+  // The units point at <run_dir>/dds/<host>.xml and run in <run_dir>: make both now.
+  if (auto made = make_run_dirs(plan->paths); !made) {
+    print_error(made.error().message);
+    return kExitFailure;
+  }
+  if (auto written = write_dds_config(*plan); !written) {
+    print_error(written.error().message);
+    return kExitFailure;
+  }
+  std::string target;
+  for (const auto& file : systemd_units(*plan)) {
+    const std::string path = out + "/" + file.name;
+    if (auto w = write_file_atomically(path, file.text); !w) {
+      print_error(w.error().message);
+      return kExitFailure;
+    }
+    std::cout << "cell: wrote " << path << "\n";
+    if (file.name.ends_with(".target")) {
+      target = file.name;
+    }
+  }
+  std::cout << "cell: wrote " << plan->dds_config << " (the DDS configuration of host '"
+            << plan->host << "')\n";
+  if (!options.install) {
+    std::cout << fmt::format(
+        "cell: install with `cell systemd --install{} --host {}`, then `systemctl enable --now "
+        "{}`\n",
+        profile_hint(plan->profile), plan->host, target);
+    return kExitOk;
+  }
+  if (access("/run/systemd/system", F_OK) != 0) {
+    std::cout << "cell: systemd is not running on this machine: run `systemctl daemon-reload` "
+                 "and `systemctl enable --now "
+              << target << "` once it is\n";
+    return kExitOk;
+  }
+  const int rc = std::system("systemctl daemon-reload");
+  if (rc != 0) {
+    print_error(fmt::format("`systemctl daemon-reload` failed (status {})", rc));
+    return kExitFailure;
+  }
+  std::cout << "cell: systemd reloaded; start with `systemctl enable --now " << target << "`\n";
+  return kExitOk;
+}
+
 int main_cli(int argc, char** argv) {
   CLI::App app("cell: start, supervise and stop the services of a workcell", "cell");
   app.set_version_flag("--version",
@@ -522,12 +659,17 @@ int main_cli(int argc, char** argv) {
   up_cmd->add_flag("-d,--detach", up.detach,
                    "run in the background (output in <run_dir>/logs/cell.log)");
   up_cmd->add_option("--only", up.only, "start only this service (repeatable)");
+  up_cmd->add_option("--host", up.host,
+                     "which host of a multi-host profile this machine is (default: the host "
+                     "named like this machine)");
+  up_cmd->add_option("--run-dir", up.run_dir, "run directory (default: the profile's run_dir)");
 
   DownOptions down;
   auto* down_cmd = app.add_subcommand("down", "stop the supervisor and every service");
   down_cmd->add_option("-p,--profile", down.profile, "profile YAML (default deploy/local.yaml)");
   down_cmd->add_option("--timeout", down.timeout_s, "seconds to wait before killing, default 30")
       ->check(CLI::PositiveNumber);
+  down_cmd->add_option("--run-dir", down.run_dir, "run directory (default: the profile's)");
 
   StatusOptions status;
   auto* status_cmd = app.add_subcommand("status", "show every service of the profile");
@@ -536,6 +678,25 @@ int main_cli(int argc, char** argv) {
   status_cmd->add_flag("--json", status.json, "print JSON");
   status_cmd->add_option("--timeout", status.timeout_s, "seconds of bus discovery, default 2")
       ->check(CLI::PositiveNumber);
+  status_cmd->add_option("--host", status.host, "look from this host of a multi-host profile");
+  status_cmd->add_option("--run-dir", status.run_dir, "run directory (default: the profile's)");
+  status_cmd->add_option("--identity", status.identity,
+                         "DDS identity when the profile's security is on (default viewer)");
+
+  GenerateOptions gen;
+  auto* dds_cmd =
+      app.add_subcommand("dds-config", "print the Cyclone DDS configuration of a profile host");
+  auto* systemd_cmd =
+      app.add_subcommand("systemd", "write systemd units for the services of a profile host");
+  for (auto* cmd : {dds_cmd, systemd_cmd}) {
+    cmd->add_option("-p,--profile", gen.profile, "profile YAML with a `hosts:` section")
+        ->required();
+    cmd->add_option("--host", gen.host, "the host (default: the one named like this machine)");
+    cmd->add_option("--run-dir", gen.run_dir, "run directory (default: the profile's)");
+  }
+  systemd_cmd->add_option("--out", gen.out, "directory for the unit files");
+  systemd_cmd->add_flag("--install", gen.install,
+                        "write them to /etc/systemd/system and reload systemd");
 
   try {
     app.parse(argc, argv);
@@ -548,6 +709,12 @@ int main_cli(int argc, char** argv) {
   }
   if (down_cmd->parsed()) {
     return run_down(down);
+  }
+  if (dds_cmd->parsed()) {
+    return run_dds_config(gen);
+  }
+  if (systemd_cmd->parsed()) {
+    return run_systemd(gen);
   }
   return run_status(status);
 }

@@ -1,6 +1,9 @@
 #include "profile.hpp"
 
+#include <arpa/inet.h>
 #include <unistd.h>
+
+#include <cctype>
 
 #include <cstdlib>
 #include <filesystem>
@@ -81,6 +84,13 @@ void read_services(config::MapReader& root, Profile& profile) {
     s.optional("args", spec.args);
     s.optional("host", spec.host);
     read_env(s, spec);
+    config::MapReader limits = s.child("limits", false);
+    limits.optional("memory_mib", spec.memory_max_mib);
+    limits.optional("cpu_percent", spec.cpu_quota_percent);
+    if (spec.memory_max_mib < 0 || spec.cpu_quota_percent < 0) {
+      limits.fail(spec.memory_max_mib < 0 ? "memory_mib" : "cpu_percent", "must be >= 0");
+    }
+    s.absorb(limits);
     if (s.has("name") && !valid_service_name(spec.name)) {
       s.fail("name", fmt::format("'{}' is not a valid service name (1..{} letters, digits, "
                                  "'_', '-', '.', starting with a letter or digit)",
@@ -97,13 +107,65 @@ void read_services(config::MapReader& root, Profile& profile) {
     }
     if (s.has("host") && spec.host.empty()) {
       s.fail("host", "must not be empty (use 'local')");
+    } else if (!profile.hosts.empty() && profile.host(spec.host) == nullptr) {
+      std::string names;
+      for (const auto& h : profile.hosts) {
+        names += (names.empty() ? "" : ", ") + h.name;
+      }
+      s.fail(s.has("host") ? "host" : "name",
+             fmt::format("service '{}' must run on one of the profile's hosts ({}), not '{}'",
+                         spec.name, names, spec.host));
     }
     root.absorb(s);
     profile.services.push_back(std::move(spec));
   }
 }
 
+bool valid_ipv4(const std::string& text) {
+  in_addr addr{};
+  return inet_pton(AF_INET, text.c_str(), &addr) == 1;
+}
+
+void read_hosts(config::MapReader& root, Profile& profile) {
+  config::MapReader hosts = root.child("hosts", false);
+  for (const auto& entry : hosts.node()) {
+    const std::string key = entry.first.as<std::string>("");
+    config::MapReader h = hosts.child(key, true);
+    HostSpec spec;
+    spec.name = key;
+    spec.where = config::location(h.path(), entry.second);
+    h.required("address", spec.address);
+    h.optional("interface", spec.interface);
+    if (!valid_service_name(key)) {
+      hosts.fail(key, "not a valid host name (letters, digits, '_', '-', '.')");
+    }
+    if (h.has("address") && !valid_ipv4(spec.address)) {
+      h.fail("address", fmt::format("'{}' is not an IPv4 address", spec.address));
+    }
+    hosts.absorb(h);
+    profile.hosts.push_back(std::move(spec));
+  }
+  root.absorb(hosts);
+}
+
+std::string host_variable(const std::string& host) {
+  std::string name = "CELL_HOST_";
+  for (const char c : host) {
+    name += (c == '-' || c == '.') ? '_' : static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  }
+  return name + "_ADDRESS";
+}
+
 }  // namespace
+
+const HostSpec* Profile::host(const std::string& host_name) const {
+  for (const auto& h : hosts) {
+    if (h.name == host_name) {
+      return &h;
+    }
+  }
+  return nullptr;
+}
 
 std::string default_profile_path() { return service::resolve_path("deploy/local.yaml"); }
 
@@ -126,6 +188,39 @@ std::string this_host() {
   char host[256] = {};
   gethostname(host, sizeof host - 1);
   return host;
+}
+
+Result<std::string> select_host(const Profile& profile, const std::string& requested) {
+  std::string names;
+  for (const auto& h : profile.hosts) {
+    names += (names.empty() ? "" : ", ") + h.name;
+  }
+  if (!requested.empty()) {
+    if (profile.host(requested) != nullptr) {
+      return requested;
+    }
+    return Error{Errc::kConfig,
+                 profile.hosts.empty()
+                     ? fmt::format("{}: --host {}: this profile has no `hosts:` section (every "
+                                   "service runs on one machine)",
+                                   profile.path, requested)
+                     : fmt::format("{}: --host {}: no such host in the profile (it has: {})",
+                                   profile.path, requested, names)};
+  }
+  if (profile.hosts.empty()) {
+    return std::string();
+  }
+  if (profile.host(this_host()) != nullptr) {
+    return this_host();
+  }
+  return Error{Errc::kConfig,
+               fmt::format("{}: this profile spreads the cell over hosts ({}); say which one this "
+                           "machine ('{}') is with --host NAME",
+                           profile.path, names, this_host())};
+}
+
+bool runs_on(const ServiceSpec& spec, const std::string& host) {
+  return host.empty() ? is_local_host(spec.host) : spec.host == host;
 }
 
 bool is_local_host(const std::string& host) {
@@ -151,6 +246,13 @@ Result<Profile> load_profile(const std::string& path) {
   bus.optional("domain_id", profile.bus.domain_id);
   bus.optional("partition", profile.bus.partition);
   bus.optional("cyclonedds_config", profile.bus.cyclonedds_config);
+  bus.optional("multicast", profile.bus.multicast);
+  bus.optional("receive_buffer_mib", profile.bus.receive_buffer_mib);
+  bus.optional("images_across_hosts", profile.bus.images_across_hosts);
+  if (!(profile.bus.receive_buffer_mib >= 0.0625 && profile.bus.receive_buffer_mib <= 1024.0)) {
+    bus.fail("receive_buffer_mib",
+             fmt::format("must be in [0.0625, 1024], got {}", profile.bus.receive_buffer_mib));
+  }
   if (profile.bus.domain_id > kMaxDomainId) {
     bus.fail("domain_id",
              fmt::format("must be 0..{}, got {}", kMaxDomainId, profile.bus.domain_id));
@@ -192,6 +294,15 @@ Result<Profile> load_profile(const std::string& path) {
     root.fail("stop_grace_s", fmt::format("must be in (0, 600], got {}", profile.stop_grace_s));
   }
 
+  read_hosts(root, profile);
+  config::MapReader security = root.child("security", false);
+  security.optional("enabled", profile.security.enabled);
+  security.optional("dir", profile.security.dir);
+  if (security.has("dir") && profile.security.dir.empty()) {
+    security.fail("dir", "must not be empty");
+  }
+  root.absorb(security);
+
   read_services(root, profile);
   CELL_TRY(root.finish());
   return profile;
@@ -210,6 +321,16 @@ Status apply_environment(Profile& profile) {
   if (const char* partition = std::getenv("CELL_PARTITION");
       partition != nullptr && *partition != '\0') {
     profile.bus.partition = partition;
+  }
+  for (auto& host : profile.hosts) {
+    const std::string variable = host_variable(host.name);
+    if (const char* address = std::getenv(variable.c_str()); address != nullptr && *address != '\0') {
+      if (!valid_ipv4(address)) {
+        return Error{Errc::kConfig, fmt::format("environment {} must be an IPv4 address, got '{}'",
+                                                variable, address)};
+      }
+      host.address = address;
+    }
   }
   return ok_status();
 }

@@ -19,6 +19,8 @@ struct ServiceSpec {
   std::vector<std::string> args;                         ///< extra arguments, appended
   std::vector<std::pair<std::string, std::string>> env;  ///< extra environment, in file order
   std::string host = "local";  ///< "local" or a hostname: `cell up` starts only its own
+  int memory_max_mib = 0;      ///< systemd MemoryMax (`limits.memory_mib`); 0: 2048
+  int cpu_quota_percent = 0;   ///< systemd CPUQuota (`limits.cpu_percent`); 0: none
   std::string where;           ///< "file:line:col" of the entry, for messages
 };
 
@@ -36,6 +38,25 @@ struct BusSettings {
   std::uint32_t domain_id = 0;                                ///< 0..230
   std::string partition = "cell";                             ///< not empty
   std::string cyclonedds_config = "config/dds/loopback.xml";  ///< relative to CELL_HOME
+  // Used only by profiles with `hosts:` (the Cyclone configuration is generated per host):
+  bool multicast = false;            ///< SPDP/data multicast; false: unicast to every host
+  double receive_buffer_mib = 8.0;   ///< socket receive buffer asked for (images, bursts)
+  bool images_across_hosts = false;  ///< raw images reach hosts without a camera service
+};
+
+/// One PC of a multi-host profile (`hosts:` map). Its services say `host: <name>`.
+struct HostSpec {
+  std::string name;       ///< the key: vision, control, operations, ...
+  std::string address;    ///< IPv4 address the cell's DDS traffic uses on that PC
+  std::string interface;  ///< optional: the interface name, for the record and the units
+  std::string where;      ///< file:line:col, for messages
+};
+
+/// DDS Security (deploy/security/README.md): each service joins with its own identity, the
+/// Cyclone fragment `<dir>/<service name>.xml` that deploy/security/make-pki.sh writes.
+struct SecuritySettings {
+  bool enabled = false;
+  std::string dir = "run/dds-security";  ///< relative to CELL_HOME
 };
 
 /// A parsed and validated profile. Immutable once loaded (apply_environment aside).
@@ -46,7 +67,12 @@ struct Profile {
   std::string run_dir = "run";        ///< logs/, cell.pid, status.json; relative to CELL_HOME
   RestartPolicy restart;              ///< `restart:`
   double stop_grace_s = 5.0;          ///< SIGTERM -> SIGKILL grace per stop
+  std::vector<HostSpec> hosts;        ///< empty: one machine (services' `host` is a hostname)
+  SecuritySettings security;          ///< `security:`
   std::vector<ServiceSpec> services;  ///< at least one, names unique
+
+  /// The host named `name`, or nullptr.
+  const HostSpec* host(const std::string& name) const;
 };
 
 /// The default profile: deploy/local.yaml (relative to the working directory or CELL_HOME).
@@ -58,8 +84,9 @@ std::string default_profile_path();
 /// negative or inconsistent durations, a domain id outside 0..230.
 Result<Profile> load_profile(const std::string& path);
 
-/// Environment overrides of the bus section: CELL_DOMAIN_ID (0..230) and CELL_PARTITION.
-/// Errors: kConfig naming the variable and its value.
+/// Environment overrides: CELL_DOMAIN_ID (0..230), CELL_PARTITION, and per host
+/// CELL_HOST_<NAME>_ADDRESS (name upper-cased, '-' and '.' as '_'), e.g.
+/// CELL_HOST_CONTROL_ADDRESS=192.168.10.2. Errors: kConfig naming the variable and its value.
 Status apply_environment(Profile& profile);
 
 /// CELL_HOME (service::cell_home()) as an absolute path.
@@ -70,6 +97,16 @@ std::string home_path(const std::string& path);
 
 /// Absolute run directory of the profile.
 std::string run_dir_of(const Profile& profile);
+
+/// Which host of `profile` this machine is: `requested` (--host) when given, which must name
+/// one of its hosts; otherwise, for a profile with hosts, the host whose name is this machine's
+/// hostname; for a profile without hosts, empty (every `local` service runs here). Errors
+/// (kConfig) list the hosts there are.
+Result<std::string> select_host(const Profile& profile, const std::string& requested);
+
+/// True when `spec` runs on `host` (a key of the profile's hosts), or, with `host` empty, on
+/// this machine (is_local_host).
+bool runs_on(const ServiceSpec& spec, const std::string& host);
 
 /// True when `host` means this machine: "local", "localhost" or this host's name.
 bool is_local_host(const std::string& host);

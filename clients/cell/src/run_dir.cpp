@@ -192,21 +192,9 @@ const ServiceStatus* StatusFile::find(const std::string& name) const {
   return nullptr;
 }
 
-Status write_status(const std::string& path, const StatusFile& status) {
-  json services = json::array();
-  for (const auto& s : status.services) {
-    services.push_back(to_json(s));
-  }
-  const json doc{{"profile", status.profile},
-                 {"profile_path", status.profile_path},
-                 {"supervisor_pid", status.supervisor_pid},
-                 {"state", status.state},
-                 {"started_ns", status.started_ns},
-                 {"updated_ns", status.updated_ns},
-                 {"domain_id", status.domain_id},
-                 {"partition", status.partition},
-                 {"services", services}};
-  const std::string text = doc.dump(2) + "\n";
+Status write_file_atomically(const std::string& path, const std::string& text) {
+  std::error_code ec;
+  std::filesystem::create_directories(std::filesystem::path(path).parent_path(), ec);
   const std::string tmp = path + ".tmp";
   const int fd = open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) {
@@ -231,6 +219,24 @@ Status write_status(const std::string& path, const StatusFile& status) {
                  fmt::format("cannot rename '{}' to '{}': {}", tmp, path, errno_text(errno))};
   }
   return ok_status();
+}
+
+Status write_status(const std::string& path, const StatusFile& status) {
+  json services = json::array();
+  for (const auto& s : status.services) {
+    services.push_back(to_json(s));
+  }
+  const json doc{{"profile", status.profile},
+                 {"profile_path", status.profile_path},
+                 {"supervisor_pid", status.supervisor_pid},
+                 {"state", status.state},
+                 {"started_ns", status.started_ns},
+                 {"updated_ns", status.updated_ns},
+                 {"domain_id", status.domain_id},
+                 {"partition", status.partition},
+                 {"services", services}};
+  const std::string text = doc.dump(2) + "\n";
+  return write_file_atomically(path, text);
 }
 
 Result<StatusFile> read_status(const std::string& path) {

@@ -106,6 +106,10 @@ struct StatusFile {
   const ServiceStatus* find(const std::string& name) const;
 };
 
+/// Writes `text` to `path` through a temporary file and a rename (creating the parent
+/// directory), so a reader never sees half a file. Errors: kIo naming the file.
+Status write_file_atomically(const std::string& path, const std::string& text);
+
 /// Writes `status` as JSON to `path` atomically (temporary file + rename), so a reader never
 /// sees half a file. Errors: kIo.
 Status write_status(const std::string& path, const StatusFile& status);

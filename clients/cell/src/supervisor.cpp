@@ -20,6 +20,7 @@
 
 #include "cell/common/log.hpp"
 #include "cell/common/time.hpp"
+#include "deploy_gen.hpp"
 
 namespace cell::launcher {
 namespace {
@@ -491,7 +492,8 @@ std::string describe_exit(const process::ExitInfo& info) {
 
 Result<LaunchPlan> make_plan(const Profile& profile,
                              const std::vector<std::string>& only,
-                             const std::string& self_dir) {
+                             const std::string& self_dir,
+                             const std::string& host) {
   LaunchPlan plan;
   plan.profile = profile;
   plan.paths = RunPaths::of(run_dir_of(profile));
@@ -512,20 +514,39 @@ Result<LaunchPlan> make_plan(const Profile& profile,
     }
   }
 
-  const std::string dds_config = home_path(profile.bus.cyclonedds_config);
-  if (access(dds_config.c_str(), R_OK) != 0) {
-    errors.push_back(fmt::format("{}: key 'bus.cyclonedds_config': cannot read '{}': {}",
-                                 profile.path, dds_config, strerror(errno)));
+  plan.host = host;
+  if (host.empty()) {
+    plan.dds_config = home_path(profile.bus.cyclonedds_config);
+    if (access(plan.dds_config.c_str(), R_OK) != 0) {
+      errors.push_back(fmt::format("{}: key 'bus.cyclonedds_config': cannot read '{}': {}",
+                                   profile.path, plan.dds_config, strerror(errno)));
+    }
+  } else {
+    plan.dds_config = plan.paths.dir + "/dds/" + host + ".xml";
+    plan.dds_config_text = host_dds_config(profile, host);
   }
-  plan.cyclonedds_uri = "file://" + dds_config;
+  plan.cyclonedds_uri = "file://" + plan.dds_config;
+  const std::string security_dir = home_path(profile.security.dir);
 
   for (const auto& spec : profile.services) {
     if (!only.empty() && std::find(only.begin(), only.end(), spec.name) == only.end()) {
       continue;
     }
-    if (!is_local_host(spec.host)) {
+    if (!runs_on(spec, host)) {
       plan.not_here.push_back(fmt::format("{} (host {})", spec.name, spec.host));
       continue;
+    }
+    std::string uri = plan.cyclonedds_uri;
+    if (profile.security.enabled) {
+      const std::string identity = security_dir + "/" + spec.name + ".xml";
+      if (access(identity.c_str(), R_OK) != 0) {
+        errors.push_back(fmt::format(
+            "{}: service '{}': security is enabled but its DDS identity '{}' cannot be read "
+            "({}); make the identities with deploy/security/make-pki.sh --out {}",
+            spec.where, spec.name, identity, strerror(errno), security_dir));
+        continue;
+      }
+      uri += ",file://" + identity;
     }
     LaunchSpec launch;
     launch.name = spec.name;
@@ -555,7 +576,7 @@ Result<LaunchPlan> make_plan(const Profile& profile,
     launch.args.insert(launch.args.end(), spec.args.begin(), spec.args.end());
     launch.env = {
         "CELL_HOME=" + home_dir(), fmt::format("CELL_DOMAIN_ID={}", profile.bus.domain_id),
-        "CELL_PARTITION=" + profile.bus.partition, "CYCLONEDDS_URI=" + plan.cyclonedds_uri};
+        "CELL_PARTITION=" + profile.bus.partition, "CYCLONEDDS_URI=" + uri};
     for (const auto& [key, value] : spec.env) {
       std::erase_if(launch.env, [&key = key](const std::string& entry) {
         return entry.compare(0, key.size() + 1, key + "=") == 0;
@@ -566,8 +587,11 @@ Result<LaunchPlan> make_plan(const Profile& profile,
     plan.services.push_back(std::move(launch));
   }
   if (plan.services.empty() && errors.empty()) {
-    errors.push_back(fmt::format("{}: no service of this profile runs on this host ('{}')",
-                                 profile.path, this_host()));
+    errors.push_back(host.empty()
+                         ? fmt::format("{}: no service of this profile runs on this host ('{}')",
+                                       profile.path, this_host())
+                         : fmt::format("{}: no service of this profile runs on host '{}'",
+                                       profile.path, host));
   }
   if (!errors.empty()) {
     std::string message;
@@ -577,6 +601,13 @@ Result<LaunchPlan> make_plan(const Profile& profile,
     return Error{Errc::kConfig, std::move(message)};
   }
   return plan;
+}
+
+Status write_dds_config(const LaunchPlan& plan) {
+  if (plan.dds_config_text.empty()) {
+    return ok_status();
+  }
+  return write_file_atomically(plan.dds_config, plan.dds_config_text);
 }
 
 int supervise(const LaunchPlan& plan, int signal_fd) {

@@ -46,7 +46,10 @@ struct LaunchSpec {
 struct LaunchPlan {
   Profile profile;                    ///< the profile, environment overrides applied
   RunPaths paths;                     ///< its run directory
-  std::string cyclonedds_uri;         ///< file://<absolute path>
+  std::string host;                   ///< the profile host this machine is; empty: no hosts
+  std::string dds_config;             ///< absolute path of the network configuration
+  std::string dds_config_text;        ///< generated XML to write there first (hosts); or empty
+  std::string cyclonedds_uri;         ///< file://<dds_config> (per service: + identity)
   std::vector<LaunchSpec> services;   ///< the services to start on this machine
   std::vector<std::string> not_here;  ///< "name (host h)": profile services of other hosts
 };
@@ -58,9 +61,20 @@ struct LaunchPlan {
 /// own env entries (which win). Errors (kConfig): an executable or config file not found, an
 /// unknown name in `only`, a missing Cyclone DDS configuration; each names the profile entry
 /// (file:line:col) and what was looked for.
+///
+/// `host` (from select_host) picks a multi-host profile's share: the services with that
+/// `host:`, and a Cyclone configuration generated for that host (host_dds_config), to be
+/// written to <run_dir>/dds/<host>.xml before they start (write_dds_config). With security
+/// enabled each service's CYCLONEDDS_URI adds its identity, <security.dir>/<name>.xml, which
+/// must exist.
 Result<LaunchPlan> make_plan(const Profile& profile,
                              const std::vector<std::string>& only,
-                             const std::string& self_dir);
+                             const std::string& self_dir,
+                             const std::string& host = {});
+
+/// Writes plan.dds_config_text to plan.dds_config (atomically) when the plan generated one.
+/// Errors: kIo naming the file.
+Status write_dds_config(const LaunchPlan& plan);
 
 /// Runs the supervisor until a stop signal arrives, then stops every child (SIGTERM to its
 /// process group, SIGKILL after profile.stop_grace_s) and returns the exit code (0).
