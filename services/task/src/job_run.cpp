@@ -56,6 +56,12 @@ JobRun::JobRun(std::string job_id, const task::JobSpec& spec, const kinematics::
       control_(control),
       progress_(progress.is_object() ? std::move(progress) : nlohmann::json::object()),
       hooks_(std::move(hooks)) {
+  gateway_id_ = "gateway." + robot_.id();
+  for (const auto& r : config_.robots) {
+    if (r.id == robot_.id()) {
+      gateway_id_ = r.gateway;
+    }
+  }
   // Parts and counters travel inside the journaled progress.
   if (auto it = progress_.find("_parts"); it != progress_.end() && it->is_array()) {
     for (const auto& p : *it) {
@@ -112,15 +118,37 @@ Interrupt JobRun::hold_if_paused() {
 
 Interrupt JobRun::pause_for_robot(const std::string& reason) {
   paused_ = true;
-  pause_reason_ = fmt::format("robot '{}': {}; reset the robot to resume", robot_.id(), reason);
+  const RobotView first = links_.robot(robot_.id());
+  const bool ours = first.mode == cell_robot_MODE_STOPPED && first.stop_code == "supervisor_lost";
+  pause_reason_ =
+      ours ? fmt::format("robot '{}': {}; resetting it once it is reachable", robot_.id(),
+                         first.fault_text.empty() ? reason : first.fault_text)
+           : fmt::format("robot '{}': {}; reset the robot to resume", robot_.id(), reason);
   log::warn("job", "paused for the robot", {{"job", job_id_}, {"reason", pause_reason_}});
   report(step_text_, fraction_);
+  auto next_reset = Clock::now();
   for (;;) {
+    // Stopped by its gateway because this service was lost (a partition, a slow restart): not
+    // an operator's decision, so the job resets it itself as soon as the gateway answers.
+    const RobotView v = links_.robot(robot_.id());
+    if (v.mode == cell_robot_MODE_STOPPED && v.stop_code == "supervisor_lost" &&
+        Clock::now() >= next_reset) {
+      next_reset = Clock::now() + 1s;
+      if (interrupt_of(control_) != Interrupt::kNone) {
+        break;
+      }
+      (void)wait_for_peers({gateway_id_});
+      const Status s = links_.command(robot_.id(), cell_robot_CMD_RESET, 3000ms);
+      log::info("job", s ? "reset the robot its gateway stopped when it lost this service"
+                         : "reset of the robot failed; trying again",
+                {{"job", job_id_}, {"robot", robot_.id()},
+                 {"error", s ? std::string() : s.error().message}});
+    }
     const bool ok = links_.wait_robot(
         robot_.id(),
-        [](const RobotView& v) {
-          return v.mode != cell_robot_MODE_FAULT && v.mode != cell_robot_MODE_STOPPED &&
-                 v.mode != cell_robot_MODE_UNCONFIGURED;
+        [](const RobotView& r) {
+          return r.mode != cell_robot_MODE_FAULT && r.mode != cell_robot_MODE_STOPPED &&
+                 r.mode != cell_robot_MODE_UNCONFIGURED;
         },
         200ms, control_);
     if (control_.interrupted()) {
@@ -135,6 +163,103 @@ Interrupt JobRun::pause_for_robot(const std::string& reason) {
   log::info("job", "resumed: the robot was reset", {{"job", job_id_}});
   report(step_text_, fraction_);
   return interrupt_of(control_);
+}
+
+std::vector<std::string> JobRun::motion_peers() const {
+  return {gateway_id_, config_.motion_service};
+}
+
+std::vector<std::string> JobRun::locate_peers(const std::string& camera_id) const {
+  std::string camera = "camera." + camera_id;
+  for (const auto& c : config_.cameras) {
+    if (c.id == camera_id) {
+      camera = c.service;
+    }
+  }
+  return {camera, config_.vision_service};
+}
+
+Interrupt JobRun::wait_for_peers(const std::vector<std::string>& ids) {
+  Peers& peers = links_.peers();
+  peers.refresh();
+  std::string missing = peers.missing(ids);
+  if (missing.empty()) {
+    return interrupt_of(control_);
+  }
+  const bool was_paused = paused_;
+  const std::string was_reason = pause_reason_;
+  const auto since = Clock::now();
+  paused_ = true;
+  pause_reason_ = "waiting for " + missing;
+  log::warn("job", "paused: a service the job needs is lost",
+            {{"job", job_id_}, {"missing", missing}});
+  report(step_text_, fraction_);
+  while (!missing.empty() && !control_.interrupted()) {
+    std::this_thread::sleep_for(100ms);
+    peers.refresh();
+    const std::string now_missing = peers.missing(ids);
+    if (!now_missing.empty() && now_missing != missing) {
+      pause_reason_ = "waiting for " + now_missing;
+      report(step_text_, fraction_);
+    }
+    missing = now_missing;
+  }
+  paused_ = was_paused;
+  pause_reason_ = was_reason;
+  log::info("job", "resumed: the services it needs are back",
+            {{"job", job_id_},
+             {"after_s", fmt::format("{:.1f}", std::chrono::duration<double>(Clock::now() - since)
+                                                   .count())}});
+  report(step_text_, fraction_);
+  return interrupt_of(control_);
+}
+
+bool JobRun::peers_changed(const std::vector<std::string>& ids,
+                           const std::vector<std::uint64_t>& generations) {
+  Peers& peers = links_.peers();
+  peers.refresh(true);
+  return peers.generations(ids) != generations || !peers.missing(ids).empty();
+}
+
+MotionOutcome JobRun::recover_unseen(const std::string& motion_id, const std::string& why) {
+  log::warn("job", "the outcome of a motion was not seen: verifying",
+            {{"job", job_id_}, {"motion", motion_id}, {"why", why}});
+  MotionOutcome o;
+  o.state = cell_motion_MOTION_FAILED;
+  o.unseen = true;
+  o.reason = why;
+  const auto timeout = std::chrono::milliseconds(
+      static_cast<std::int64_t>(config_.motion_timeout_s * 1000.0));
+  for (;;) {
+    if (wait_for_peers(motion_peers()) != Interrupt::kNone) {
+      o.interrupted = interrupt_of(control_);
+      return o;
+    }
+    // The gateway may still be running the trajectory it was given: let it finish.
+    const auto gens = links_.peers().generations(motion_peers());
+    (void)links_.wait_robot(robot_.id(),
+                            [](const RobotView& v) {
+                              return !v.moving && v.mode != cell_robot_MODE_HOMING;
+                            },
+                            timeout, control_);
+    if (control_.interrupted()) {
+      o.interrupted = interrupt_of(control_);
+      return o;
+    }
+    if (!peers_changed(motion_peers(), gens)) {
+      break;
+    }
+  }
+  // A motion service that lived through it still knows (its status is transient-local).
+  if (auto status = links_.motion_status(motion_id, 1500ms);
+      status && status->state == cell_motion_MOTION_DONE) {
+    log::info("job", "the motion had completed after all", {{"job", job_id_},
+                                                             {"motion", motion_id}});
+    return *status;
+  }
+  const RobotView v = links_.robot(robot_.id());
+  o.robot_fault = v.mode == cell_robot_MODE_FAULT || v.mode == cell_robot_MODE_STOPPED;
+  return o;
 }
 
 Interrupt JobRun::sleep(double seconds) {
@@ -158,8 +283,34 @@ Result<MotionOutcome> JobRun::move(cell_motion_MotionRequest& request,
       static_cast<std::int64_t>(config_.motion_timeout_s * 1000.0));
   // Refused as busy: a motion this service sent before it was restarted still runs (or was
   // just accepted). Wait for the robot to finish it, then send again.
+  const std::string motion_id(bus::str(request.motion_id));
+  const std::vector<std::string> needed = motion_peers();
   for (int attempt = 0;; ++attempt) {
-    auto o = links_.move(request, control_, timeout, {});
+    if (const Interrupt i = wait_for_peers(needed); i != Interrupt::kNone) {
+      MotionOutcome o;
+      o.state = cell_motion_MOTION_RUNNING;
+      o.interrupted = i;
+      return o;
+    }
+    Peers& peers = links_.peers();
+    const std::vector<std::uint64_t> gens = peers.generations(needed);
+    const auto abandon = [&]() -> std::string {
+      peers.refresh();
+      if (peers.generations(needed) != gens) {
+        return "the motion service or the gateway was lost or restarted";
+      }
+      return peers.missing(needed);
+    };
+    auto o = links_.move(request, control_, timeout, {}, abandon);
+    if (o && o->unseen) {
+      return recover_unseen(motion_id, o->reason);
+    }
+    // A failure (no reader for the request, a motion service that lost the robot's state, a
+    // timeout) while a service it needs went away is not the motion's verdict either.
+    if ((!o || (o->state == cell_motion_MOTION_FAILED && !o->robot_fault)) &&
+        peers_changed(needed, gens)) {
+      return recover_unseen(motion_id, o ? o->reason : o.error().message);
+    }
     if (!o || o->state != cell_motion_MOTION_REFUSED ||
         o->reason.find("is busy with motion") == std::string::npos || attempt == 5) {
       return o;
@@ -189,6 +340,10 @@ std::optional<ExecResult> interrupted_result(Interrupt i) {
 /// rest (and to be out of a fault) before anything new is sent.
 std::optional<ExecResult> JobRun::ready_robot() {
   for (;;) {
+    if (auto r = interrupted_result(wait_for_peers(motion_peers())); r) {
+      return r;
+    }
+    const auto gens = links_.peers().generations(motion_peers());
     const bool idle = links_.wait_robot(
         robot_.id(),
         [](const RobotView& v) {
@@ -204,6 +359,9 @@ std::optional<ExecResult> JobRun::ready_robot() {
       return std::nullopt;
     }
     const RobotView v = links_.robot(robot_.id());
+    if (peers_changed(motion_peers(), gens)) {
+      continue;  // the gateway went away meanwhile: wait for it, then look again
+    }
     if (!v.known) {
       return ExecResult::failed(fmt::format("no state from robot '{}' within {} s",
                                             robot_.id(),
@@ -222,12 +380,23 @@ std::optional<ExecResult> JobRun::ready_robot() {
         return ExecResult::failed(fmt::format("robot '{}' is not homed and homing failed: {}",
                                               robot_.id(), s.error().message));
       }
+      // Homing takes a while: a gateway restarted meanwhile comes back unhomed (home again).
+      Peers& peers = links_.peers();
+      const auto home_gens = peers.generations(motion_peers());
+      bool restarted = false;
       const bool homed = links_.wait_robot(
           robot_.id(),
-          [](const RobotView& r) { return r.homed && r.mode == cell_robot_MODE_IDLE; }, 180s,
-          control_);
+          [&](const RobotView& r) {
+            peers.refresh();
+            restarted = peers.generations(motion_peers()) != home_gens;
+            return restarted || (r.homed && r.mode == cell_robot_MODE_IDLE);
+          },
+          180s, control_);
       if (auto r = interrupted_result(interrupt_of(control_)); r) {
         return r;
+      }
+      if (restarted) {
+        continue;
       }
       if (!homed) {
         return ExecResult::failed(fmt::format("robot '{}' did not finish homing in 180 s",

@@ -99,6 +99,21 @@ class JobRun {
   /// when cancelled or stopped meanwhile.
   Interrupt pause_for_robot(const std::string& reason);
 
+  /// Service ids a motion of this job needs: the robot's gateway and the motion service.
+  std::vector<std::string> motion_peers() const;
+  /// Service ids locating with `camera_id` needs: the camera's service and the vision service.
+  std::vector<std::string> locate_peers(const std::string& camera_id) const;
+
+  /// Blocks while any of `ids` has no live heartbeat (lost, or absent from the bus): the job
+  /// is PAUSED meanwhile with a step text naming them ("waiting for motion: no heartbeat"),
+  /// and resumes by itself when they are back. Returns the interrupt that ended it, if any.
+  Interrupt wait_for_peers(const std::vector<std::string>& ids);
+
+  /// True when any of `ids` was lost, vanished or restarted since `generations` were taken
+  /// (Peers::generations), or is missing now.
+  bool peers_changed(const std::vector<std::string>& ids,
+                     const std::vector<std::uint64_t>& generations);
+
   /// Sleeps `seconds`, interruptible.
   Interrupt sleep(double seconds);
 
@@ -106,7 +121,13 @@ class JobRun {
   std::string motion_id(const std::string& tag) const { return job_id_ + "/" + tag; }
 
   /// Runs one motion with the job's control and timeout; robot faults pause the job (the
-  /// outcome says robot_fault, the executor redoes its step); progress is reported.
+  /// outcome says robot_fault, the executor redoes its step); progress is reported. It first
+  /// waits for the motion service and the gateway (wait_for_peers). When either is lost or
+  /// restarted while the motion runs, the wait ends at once (not after the motion timeout):
+  /// the job waits for them and for the robot to rest, asks the motion service for the
+  /// motion's last status, and returns it when it says done; otherwise the outcome is marked
+  /// `unseen` (and robot_fault when the robot is stopped or faulted) and the executor verifies
+  /// what the robot did before it redoes its step. Never fails a job for a lost service.
   Result<MotionOutcome> move(cell_motion_MotionRequest& request, const std::string& step_text);
 
   /// Before the job's first motion (and after a fault): waits for the robot to rest (a motion
@@ -115,6 +136,10 @@ class JobRun {
   std::optional<ExecResult> ready_robot();
 
  private:
+  /// After a motion whose outcome was not seen: waits for the services and the robot's rest,
+  /// then re-checks the motion's status (motion status is transient-local).
+  MotionOutcome recover_unseen(const std::string& motion_id, const std::string& why);
+  std::string gateway_id_;
   std::string job_id_;
   const task::JobSpec& spec_;
   const kinematics::RobotModel& robot_;

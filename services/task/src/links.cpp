@@ -59,7 +59,76 @@ Links::Links(const bus::Participant& participant, const std::string& client)
       alter_topic_(participant, bus::topics::kAlter),
       alter_writer_(participant, alter_topic_, bus::topics::kAlter),
       belt_cal_topic_(participant, bus::topics::kBeltCalibration),
-      belt_cal_reader_(participant, belt_cal_topic_, bus::topics::kBeltCalibration) {}
+      belt_cal_reader_(participant, belt_cal_topic_, bus::topics::kBeltCalibration),
+      peers_(participant, client + ".peers") {}
+
+Peers::Peers(const bus::Participant& participant, const std::string& client)
+    : directory_(participant, client) {}
+
+void Peers::refresh(bool force) {
+  const auto now = Clock::now();
+  if (!force && settled_ && now - last_ < 100ms) {
+    return;
+  }
+  last_ = now;
+  auto entries = settled_ ? directory_.snapshot() : directory_.wait_settled(3000ms);
+  settled_ = true;
+  if (!entries) {
+    return;  // a read error: keep what we knew (the next refresh tries again)
+  }
+  for (auto& [id, seen] : seen_) {
+    seen.present = false;
+  }
+  for (const service::ServiceEntry& e : *entries) {
+    Seen& seen = seen_[e.service_id];
+    const bool was_alive = seen.pid != 0 && !seen.lost;
+    if (was_alive && (e.lost || e.pid != seen.pid)) {
+      ++seen.generation;
+    }
+    seen.present = true;
+    seen.lost = e.lost;
+    seen.pid = e.pid;
+  }
+  for (auto& [id, seen] : seen_) {
+    if (!seen.present && seen.pid != 0) {
+      if (!seen.lost) {
+        ++seen.generation;  // vanished (stopped): whatever it held is gone
+      }
+      seen.pid = 0;
+      seen.lost = false;
+    }
+  }
+}
+
+std::string Peers::missing(const std::vector<std::string>& ids) const {
+  std::string out;
+  for (const std::string& id : ids) {
+    auto it = seen_.find(id);
+    const char* why = nullptr;
+    if (it == seen_.end() || !it->second.present) {
+      why = "not on the bus";
+    } else if (it->second.lost) {
+      why = "no heartbeat";
+    }
+    if (why != nullptr) {
+      out += fmt::format("{}{}: {}", out.empty() ? "" : ", ", id, why);
+    }
+  }
+  return out;
+}
+
+std::uint64_t Peers::generation(const std::string& id) const {
+  auto it = seen_.find(id);
+  return it != seen_.end() ? it->second.generation : 0;
+}
+
+std::vector<std::uint64_t> Peers::generations(const std::vector<std::string>& ids) const {
+  std::vector<std::uint64_t> out;
+  for (const auto& id : ids) {
+    out.push_back(generation(id));
+  }
+  return out;
+}
 
 std::optional<Links::BeltCalibrationView> Links::belt_calibration(const std::string& belt_id) {
   auto batch = belt_cal_reader_.take_copies(8);
@@ -106,6 +175,7 @@ void Links::take_states() {
       v.tracking = s->tracking;
       v.trajectory_id = std::string(bus::str(s->trajectory_id));
       v.fault_text = std::string(bus::str(s->fault_text));
+      v.stop_code = std::string(bus::str(s->stop_code));
       v.received = Clock::now();
     }
   }
@@ -135,7 +205,8 @@ bool Links::wait_robot(const std::string& robot_id,
 
 Result<MotionOutcome> Links::move(cell_motion_MotionRequest& request, const Control& control,
                                   std::chrono::milliseconds timeout,
-                                  const std::function<void(double)>& on_progress) {
+                                  const std::function<void(double)>& on_progress,
+                                  const std::function<std::string()>& abandon) {
   const std::string robot_id(bus::str(request.robot_id));
   const std::string motion_id(bus::str(request.motion_id));
   auto seq = motions_.send(request, 5000ms);
@@ -183,6 +254,15 @@ Result<MotionOutcome> Links::move(cell_motion_MotionRequest& request, const Cont
       o.state = cell_motion_MOTION_RUNNING;
       o.interrupted = Interrupt::kStop;
       return o;
+    }
+    if (abandon) {
+      if (std::string why = abandon(); !why.empty()) {
+        MotionOutcome o;
+        o.state = cell_motion_MOTION_FAILED;
+        o.unseen = true;
+        o.reason = fmt::format("motion '{}': outcome not seen ({})", motion_id, why);
+        return o;
+      }
     }
     if (Clock::now() >= deadline) {
       return Error{Errc::kProtocol, fmt::format("motion '{}' did not end within {} s", motion_id,

@@ -17,6 +17,7 @@
 #include "cell/bus/writer.hpp"
 #include "cell/common/result.hpp"
 #include "cell/kinematics/joints.hpp"
+#include "cell/service/directory.hpp"
 
 /// The task service's view of the rest of the cell, one set per worker thread (each owns its
 /// readers, so no sample meant for one worker is taken by another): motion requests and their
@@ -51,6 +52,7 @@ struct RobotView {
   bool tracking = false;  ///< arrived, following ALTER corrections (a belt)
   std::string trajectory_id;
   std::string fault_text;
+  std::string stop_code;  ///< why STOPPED: "command", "supervisor_lost" (the gateway's own stop)
   Clock::time_point received{};
 };
 
@@ -61,6 +63,10 @@ struct MotionOutcome {
   std::vector<double> final_joints;
   Interrupt interrupted = Interrupt::kNone;
   bool robot_fault = false;  ///< it failed because the robot faulted (the job pauses)
+  /// The outcome could not be seen: the motion service or the robot's gateway was lost or
+  /// restarted while the motion ran (the request or its status may be gone). The robot may
+  /// still have executed it: the executor verifies before it redoes anything.
+  bool unseen = false;
   bool ok() const { return state == cell_motion_MOTION_DONE; }
 };
 
@@ -100,6 +106,40 @@ struct BeltReading {
   Clock::time_point received{};
 };
 
+/// The heartbeats of the services a job needs, from service::ServiceDirectory (3 s liveliness
+/// lease): which are alive, and a generation per service that changes whenever it was lost,
+/// vanished or came back as another process (its pid changed), so a wait can tell that a
+/// request it sent may be gone. Not thread-safe: one worker uses one.
+class Peers {
+ public:
+  /// Throws bus::BusError when the heartbeat reader cannot be created (setup).
+  Peers(const bus::Participant& participant, const std::string& client);
+
+  /// Reads the heartbeats that arrived (at most every 100 ms unless `force`). The first call
+  /// waits up to 3 s for discovery to settle.
+  void refresh(bool force = false);
+
+  /// Empty when every id has a live heartbeat; else what is wrong with each of the others,
+  /// e.g. "motion: no heartbeat, gateway.ibm7545: not on the bus" (after refresh()).
+  std::string missing(const std::vector<std::string>& ids) const;
+
+  /// Changes whenever `id` was lost or vanished, or its heartbeat's pid changed.
+  std::uint64_t generation(const std::string& id) const;
+  std::vector<std::uint64_t> generations(const std::vector<std::string>& ids) const;
+
+ private:
+  struct Seen {
+    bool present = false;
+    bool lost = false;
+    std::int32_t pid = 0;
+    std::uint64_t generation = 0;
+  };
+  service::ServiceDirectory directory_;
+  std::map<std::string, Seen, std::less<>> seen_;
+  Clock::time_point last_{};
+  bool settled_ = false;
+};
+
 class Links {
  public:
   /// `client` names this worker on the bus (e.g. "task.ibm7545"). Throws bus::BusError when a
@@ -111,9 +151,12 @@ class Links {
   /// kCancel; stop: the motion is left to finish by itself (kStop). `on_progress(0..1)` is
   /// called as the motion service reports. Errors: kTimeout-like kProtocol when nobody serves
   /// the motion topic or no end comes within `timeout`.
+  /// `abandon`, when given, is asked every poll: a non-empty answer (why) ends the wait with
+  /// an outcome marked `unseen` (a service the motion needs was lost or restarted).
   Result<MotionOutcome> move(cell_motion_MotionRequest& request, const Control& control,
                              std::chrono::milliseconds timeout,
-                             const std::function<void(double)>& on_progress = {});
+                             const std::function<void(double)>& on_progress = {},
+                             const std::function<std::string()>& abandon = {});
 
   /// Non-blocking form: sends the request (its id in the return) ...
   Result<std::uint64_t> send_motion(cell_motion_MotionRequest& request);
@@ -180,6 +223,9 @@ class Links {
 
   const std::string& client_id() const noexcept { return motions_.client_id(); }
 
+  /// The heartbeats of the cell's services (this worker's own directory).
+  Peers& peers() noexcept { return peers_; }
+
  private:
   void take_states();
   void take_belts();
@@ -202,6 +248,7 @@ class Links {
   bus::Topic<cell_calibration_BeltCalibration> belt_cal_topic_;
   bus::Reader<cell_calibration_BeltCalibration> belt_cal_reader_;
   std::map<std::string, BeltCalibrationView, std::less<>> belt_cals_;
+  Peers peers_;
 };
 
 }  // namespace cell::task_service

@@ -184,15 +184,27 @@ class TableJob {
     if (spec_.lights == Lights::kKeep) {
       return std::nullopt;
     }
-    cell_robot_RobotCommand c{};
-    c.robot_id = bus::borrow(run_.robot().id());
-    c.kind = cell_robot_CMD_LIGHTS;
-    c.halogen_on = spec_.lights == Lights::kHalogen || spec_.lights == Lights::kBoth;
-    c.fluorescent_on = spec_.lights == Lights::kFluorescent || spec_.lights == Lights::kBoth;
-    if (auto s = run_.links().command(c, 5000ms); !s) {
-      return ExecResult::failed(fmt::format("lights: {}", s.error().message));
+    const std::string robot_id = run_.robot().id();
+    const std::vector<std::string> gateway{run_.motion_peers().front()};
+    for (int attempt = 0;; ++attempt) {
+      if (auto r = interrupted(run_.wait_for_peers(gateway)); r) {
+        return r;
+      }
+      const auto gens = run_.links().peers().generations(gateway);
+      cell_robot_RobotCommand c{};
+      c.robot_id = bus::borrow(robot_id);
+      c.kind = cell_robot_CMD_LIGHTS;
+      c.halogen_on = spec_.lights == Lights::kHalogen || spec_.lights == Lights::kBoth;
+      c.fluorescent_on = spec_.lights == Lights::kFluorescent || spec_.lights == Lights::kBoth;
+      auto s = run_.links().command(c, 5000ms);
+      if (s) {
+        return std::nullopt;
+      }
+      // The gateway went away while it was asked: ask its successor (not a reason to fail).
+      if (!run_.peers_changed(gateway, gens) || attempt >= 20) {
+        return ExecResult::failed(fmt::format("lights: {}", s.error().message));
+      }
     }
-    return std::nullopt;
   }
 
   /// Sends a motion; robot faults pause the job and return kRetry via `retry`.
@@ -213,6 +225,14 @@ class TableJob {
       if (auto i = interrupted(run_.pause_for_robot(o->reason)); i) {
         return i;
       }
+      if (auto r2 = run_.ready_robot(); r2) {
+        return r2;
+      }
+      retry = true;
+    } else if (o->unseen) {
+      // Motion or gateway lost or restarted while it ran: the robot is at rest now; a
+      // restarted 7545 gateway may have come back unhomed (ready_robot homes it). The caller
+      // verifies what the motion did before redoing it.
       if (auto r2 = run_.ready_robot(); r2) {
         return r2;
       }
@@ -260,7 +280,15 @@ class TableJob {
     const auto timeout =
         std::chrono::milliseconds(static_cast<std::int64_t>(run_.config().locate_timeout_s * 1000));
     Result<Frame> frame = Error{Errc::kProtocol, "not located"};
-    for (int attempt = 0; attempt < 3; ++attempt) {
+    // Three real failures skip the window; a try during which the camera or the vision
+    // service was lost or restarted does not count (its request may simply be gone): the job
+    // waits for them (paused) and asks again.
+    const std::vector<std::string> needed = run_.locate_peers(spec_.camera);
+    for (int failures = 0, attempt = 0; failures < 3 && attempt < 40; ++attempt) {
+      if (auto r = interrupted(run_.wait_for_peers(needed)); r) {
+        return r;
+      }
+      const auto gens = run_.links().peers().generations(needed);
       frame = run_.links().locate(spec_.camera, cell_vision_TRIGGER_NOW, timeout, run_.control());
       if (auto r = interrupted(interrupt_of(run_.control())); r) {
         return r;
@@ -268,6 +296,14 @@ class TableJob {
       if (frame && frame->error.empty()) {
         break;
       }
+      if (run_.peers_changed(needed, gens)) {
+        log::warn("job", "locating again: the camera or the vision service was lost or restarted",
+                  {{"job", run_.job_id()},
+                   {"window", std::to_string(w + 1)},
+                   {"error", frame ? frame->error : frame.error().message}});
+        continue;
+      }
+      ++failures;
     }
     if (!frame || !frame->error.empty()) {
       run_.count("locate_failed");
@@ -455,19 +491,27 @@ class TableJob {
       if (retry) {
         // The robot faulted mid-way and was reset. Picking: look again before anything (the
         // part may have moved or be in the gripper). Placing: the part is (or was) held.
+        // The same when the motion's outcome was not seen (motion or gateway lost): the
+        // gripper tells what the robot did. Pick with the gripper closed: it holds the part
+        // (a grasp that closed on nothing is found when the window is looked at again).
+        // Place with the gripper open: the part was let go at its slot.
+        const RobotView v = run_.links().robot(run_.robot().id());
+        const char* why = o.robot_fault ? "a robot fault" : "a lost service";
         if (picking) {
-          const RobotView v = run_.links().robot(run_.robot().id());
           if (v.gripper == cell_robot_GRIPPER_CLOSED) {
             h["stage"] = "place";
             h["place_id"] = next_id("place");
           } else {
             p["holding"] = nullptr;
-            return journal("pick interrupted by a robot fault", {{"part", index}});
+            uncount_attempt(index);
+            return journal(fmt::format("pick interrupted by {}", why), {{"part", index}});
           }
+        } else if (v.gripper == cell_robot_GRIPPER_OPEN) {
+          return record_placed(index, fmt::format("placed (seen from the gripper after {})", why));
         } else {
           h["place_id"] = next_id("place");
         }
-        if (auto j = journal("resuming after a robot fault", {{"part", index}}); j) {
+        if (auto j = journal(fmt::format("resuming after {}", why), {{"part", index}}); j) {
           return j;
         }
         continue;
@@ -490,24 +534,42 @@ class TableJob {
         }
         continue;
       }
-      // Placed.
-      const std::uint32_t slot_index = h["slot"].get<std::uint32_t>();
-      const task::Slot& slot = spec_.place.slots[slot_index];
-      rec.outcome = cell_task_PART_PLACED;
-      rec.detail.clear();
-      rec.placed_x_mm = slot.x_mm;
-      rec.placed_y_mm = slot.y_mm;
-      rec.placed_yaw_rad = slot.yaw_rad;
-      auto& free = p["free_slots"];
-      for (auto it = free.begin(); it != free.end(); ++it) {
-        if (it->get<std::uint32_t>() == slot_index) {
-          free.erase(it);
-          break;
-        }
+      return record_placed(index, "placed");
+    }
+  }
+
+  /// The part of progress["holding"] is in its slot: record it, take the slot, journal.
+  std::optional<ExecResult> record_placed(int index, const std::string& step) {
+    json& p = run_.progress();
+    json& h = p["holding"];
+    PartRecord& rec = run_.parts()[static_cast<std::size_t>(index)];
+    const std::uint32_t slot_index = h["slot"].get<std::uint32_t>();
+    const task::Slot& slot = spec_.place.slots[slot_index];
+    rec.outcome = cell_task_PART_PLACED;
+    rec.detail.clear();
+    rec.placed_x_mm = slot.x_mm;
+    rec.placed_y_mm = slot.y_mm;
+    rec.placed_yaw_rad = slot.yaw_rad;
+    auto& free = p["free_slots"];
+    for (auto it = free.begin(); it != free.end(); ++it) {
+      if (it->get<std::uint32_t>() == slot_index) {
+        free.erase(it);
+        break;
       }
-      p["holding"] = nullptr;
-      run_.count("placed");
-      return journal("placed", {{"part", index}, {"slot", slot_index}});
+    }
+    p["holding"] = nullptr;
+    run_.count("placed");
+    return journal(step, {{"part", index}, {"slot", slot_index}});
+  }
+
+  /// A pick that was interrupted (fault, lost service, restart) is not a missed grasp: it does
+  /// not use up one of the part's retries.
+  void uncount_attempt(int index) {
+    json& attempts = run_.progress()["attempts"];
+    const std::string key = std::to_string(index);
+    const int tries = attempts.value(key, 0);
+    if (tries > 0) {
+      attempts[key] = tries - 1;
     }
   }
 
@@ -532,34 +594,28 @@ class TableJob {
         return continue_holding();
       }
       // Placed before the restart: record it as placed.
-      const int index = h["part"].get<int>();
-      PartRecord& rec = run_.parts()[static_cast<std::size_t>(index)];
-      const std::uint32_t slot_index = h["slot"].get<std::uint32_t>();
-      const task::Slot& slot = spec_.place.slots[slot_index];
-      rec.outcome = cell_task_PART_PLACED;
-      rec.placed_x_mm = slot.x_mm;
-      rec.placed_y_mm = slot.y_mm;
-      rec.placed_yaw_rad = slot.yaw_rad;
-      auto& free = p["free_slots"];
-      for (auto it = free.begin(); it != free.end(); ++it) {
-        if (it->get<std::uint32_t>() == slot_index) {
-          free.erase(it);
-          break;
-        }
-      }
-      p["holding"] = nullptr;
-      run_.count("placed");
-      return journal("placed (before the restart)", {{"part", index}});
+      return record_placed(h["part"].get<int>(), "placed (before the restart)");
     }
+    const RobotView v = run_.links().robot(run_.robot().id());
     if (!picking) {
-      // The place never happened (or failed): the part is in the gripper when it is closed.
-      const RobotView v = run_.links().robot(run_.robot().id());
+      // No status (a motion service restarted too): the gripper tells. Closed: the part is
+      // still held, place it; open: it was let go at its slot (ready_robot waited for rest).
       if (v.gripper == cell_robot_GRIPPER_CLOSED) {
         h["place_id"] = next_id("place");
         return continue_holding();
       }
+      if (v.gripper == cell_robot_GRIPPER_OPEN) {
+        return record_placed(h["part"].get<int>(), "placed (seen from the gripper after a restart)");
+      }
+    } else if (!status && v.gripper == cell_robot_GRIPPER_CLOSED) {
+      // No status, gripper closed: the pick ran to its end before the motion service's
+      // history was lost; place what it holds.
+      h["stage"] = "place";
+      h["place_id"] = next_id("place");
+      return continue_holding();
     }
     // The pick never ran (or failed): forget it; the window is looked at again.
+    uncount_attempt(h["part"].get<int>());
     p["holding"] = nullptr;
     return journal("interrupted pick dropped; looking again", {{"motion", id}});
   }

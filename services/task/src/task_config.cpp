@@ -43,6 +43,10 @@ Result<TaskConfig> load_config(const config::Document& doc) {
     RobotEntry e;
     r.required("id", e.id);
     r.required("config", e.config);
+    r.optional("gateway", e.gateway);
+    if (e.gateway.empty()) {
+      e.gateway = "gateway." + e.id;
+    }
     e.config = service::resolve_path(e.config);
     unique(r, c.robots, e.id, "robot");
     c.robots.push_back(e);
@@ -58,6 +62,10 @@ Result<TaskConfig> load_config(const config::Document& doc) {
     r.required("id", e.id);
     r.required("robot", e.robot);
     r.required("working_plane_z_mm", e.working_plane_z_mm);
+    r.optional("service", e.service);
+    if (e.service.empty()) {
+      e.service = "camera." + e.id;
+    }
     unique(r, c.cameras, e.id, "camera");
     if (!listed(c.robots, e.robot)) {
       r.fail("robot", fmt::format("robot '{}' is not in robots", e.robot));
@@ -111,6 +119,16 @@ Result<TaskConfig> load_config(const config::Document& doc) {
     }
   }
   root.absorb(t);
+  config::MapReader svc = root.child("services", false);
+  svc.optional("motion", c.motion_service);
+  svc.optional("vision", c.vision_service);
+  if (c.motion_service.empty()) {
+    svc.fail("motion", "must name the motion service's id, e.g. motion");
+  }
+  if (c.vision_service.empty()) {
+    svc.fail("vision", "must name the vision service's id, e.g. vision");
+  }
+  root.absorb(svc);
   root.optional("status_period_s", c.status_period_s);
   root.optional("keep_finished", c.keep_finished);
   if (!(c.status_period_s > 0)) {

@@ -16,6 +16,7 @@ namespace cell::task_service {
 struct RobotEntry {
   std::string id;
   std::string config;  ///< config/robots/<id>.yaml, resolved
+  std::string gateway;  ///< service id of its gateway (heartbeat watched); default gateway.<id>
 };
 
 /// A camera the task service uses: which robot picks what it sees and the plane the parts lie
@@ -24,6 +25,7 @@ struct CameraEntry {
   std::string id;
   std::string robot;
   double working_plane_z_mm = 0.0;
+  std::string service;  ///< service id of the camera (heartbeat watched); default camera.<id>
 };
 
 /// A belt's NOMINAL geometry in a robot's base frame, used until the calibration service
@@ -52,6 +54,10 @@ struct TaskConfig {
   double locate_timeout_s = 5.0;     ///< an image + its detections must come in this long
   double photocell_timeout_s = 30.0; ///< conveyor: no part arriving for this long ends a wait
   double robot_state_timeout_s = 5.0;
+  /// Service ids the jobs need besides each robot's gateway and each camera (`services:`):
+  /// their heartbeats are watched, and a job pauses while one is lost or absent.
+  std::string motion_service = "motion";
+  std::string vision_service = "vision";
   double status_period_s = 0.5;      ///< JobStatus of running jobs at least this often
   int keep_finished = 200;           ///< finished jobs kept on the status topic
 };

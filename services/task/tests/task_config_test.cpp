@@ -28,6 +28,22 @@ TEST(TaskConfig, TheShippedConfigLoads) {
   EXPECT_EQ(c->robots.size(), 3U);
   ASSERT_EQ(c->belts.size(), 1U);
   EXPECT_NEAR(c->belts[0].direction.y(), -1.0, 1e-12);
+  EXPECT_EQ(c->robots[1].gateway, "gateway.picker");
+  EXPECT_EQ(c->cameras[0].service, "camera.ibm7545_eye");
+  EXPECT_EQ(c->motion_service, "motion");
+}
+
+TEST(TaskConfig, WatchedServicesDefaultFromTheIds) {
+  auto c = parse("robots:\n  - {id: r, config: x.yaml}\ncameras:\n  - {id: c, robot: r, "
+                 "working_plane_z_mm: 0}\n");
+  ASSERT_THAT(c, IsOk());
+  EXPECT_EQ(c->robots[0].gateway, "gateway.r");
+  EXPECT_EQ(c->cameras[0].service, "camera.c");
+  EXPECT_EQ(c->motion_service, "motion");
+  EXPECT_EQ(c->vision_service, "vision");
+  auto bad = parse("robots:\n  - {id: r, config: x.yaml}\nservices: {motion: ''}\n");
+  ASSERT_FALSE(bad);
+  EXPECT_THAT(bad.error().message, HasSubstr("services.motion"));
 }
 
 TEST(TaskConfig, ErrorsNameTheLineAndTheKey) {
