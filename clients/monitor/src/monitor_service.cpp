@@ -191,6 +191,7 @@ MonitorService::MonitorService(service::Context& ctx, const MonitorConfig& confi
       motion_status_topic_(ctx.participant(), bus::topics::kMotionStatus),
       world_topic_(ctx.participant(), bus::topics::kWorldState),
       image_topic_(ctx.participant(), bus::topics::kImage),
+      preview_topic_(ctx.participant(), bus::topics::kImagePreview),
       detections_topic_(ctx.participant(), bus::topics::kDetections),
       edge_topic_(ctx.participant(), bus::topics::kEdgeResult),
       camera_cal_topic_(ctx.participant(), bus::topics::kCameraCalibration),
@@ -202,6 +203,7 @@ MonitorService::MonitorService(service::Context& ctx, const MonitorConfig& confi
       motion_status_(ctx.participant(), motion_status_topic_, bus::topics::kMotionStatus),
       world_(ctx.participant(), world_topic_, bus::topics::kWorldState),
       images_(ctx.participant(), image_topic_, bus::topics::kImage),
+      previews_(ctx.participant(), preview_topic_, bus::topics::kImagePreview),
       detections_(ctx.participant(), detections_topic_, bus::topics::kDetections),
       edges_(ctx.participant(), edge_topic_, bus::topics::kEdgeResult),
       camera_cals_(ctx.participant(), camera_cal_topic_, bus::topics::kCameraCalibration),
@@ -345,6 +347,7 @@ void MonitorService::run(service::Context& ctx) {
   waitset.attach(motion_status_.condition(), kMotionStatus);
   waitset.attach(world_.condition(), kWorld);
   waitset.attach(images_.condition(), kImages);
+  waitset.attach(previews_.condition(), kImages);
   waitset.attach(detections_.condition(), kDetections);
   waitset.attach(edges_.condition(), kEdges);
   waitset.attach(camera_cals_.condition(), kCameraCal);
@@ -415,11 +418,18 @@ bool MonitorService::take_bus(bool robots_pending) {
     world = true;
   }
   bool images = false;
-  if (auto taken = images_.take_copies(4); taken) {
-    std::lock_guard lock(latest_mutex_);
-    for (auto& image : *taken) {
-      images_latest_[std::string(bus::str(image->camera_id))].latest = std::move(image);
-      images = true;
+  // Full-rate images where the camera's PC lets them through, previews from elsewhere: the
+  // newest of either per camera is what is shown.
+  for (auto* reader : {&images_, &previews_}) {
+    if (auto taken = reader->take_copies(4); taken) {
+      std::lock_guard lock(latest_mutex_);
+      for (auto& image : *taken) {
+        auto& slot = images_latest_[std::string(bus::str(image->camera_id))].latest;
+        if (!slot || image->header.stamp_ns >= (*slot)->header.stamp_ns) {
+          slot = std::move(image);
+        }
+        images = true;
+      }
     }
   }
   (void)detections_.take_each([&](const cell_vision_Detections& d, const dds_sample_info_t&) {

@@ -158,6 +158,7 @@ class MonitorService {
   bus::Topic<cell_motion_MotionStatus> motion_status_topic_;
   bus::Topic<cell_world_WorldState> world_topic_;
   bus::Topic<cell_vision_Image> image_topic_;
+  bus::Topic<cell_vision_Image> preview_topic_;
   bus::Topic<cell_vision_Detections> detections_topic_;
   bus::Topic<cell_vision_EdgeResult> edge_topic_;
   bus::Topic<cell_calibration_CameraCalibration> camera_cal_topic_;
@@ -169,6 +170,7 @@ class MonitorService {
   bus::Reader<cell_motion_MotionStatus> motion_status_;
   bus::Reader<cell_world_WorldState> world_;
   bus::Reader<cell_vision_Image> images_;
+  bus::Reader<cell_vision_Image> previews_;  ///< what reaches a monitor on another PC
   bus::Reader<cell_vision_Detections> detections_;
   bus::Reader<cell_vision_EdgeResult> edges_;
   bus::Reader<cell_calibration_CameraCalibration> camera_cals_;

@@ -122,6 +122,11 @@ Result<CameraConfig> load_config(const config::Document& doc) {
   root.optional("robot_id", c.robot_id);
   root.optional("robot_state_timeout_s", c.robot_state_timeout_s);
   root.optional("world_state_timeout_s", c.world_state_timeout_s);
+  root.optional("preview_hz", c.preview_hz);
+  if (!(c.preview_hz >= 0.0 && c.preview_hz <= 100.0)) {
+    root.fail("preview_hz", fmt::format("must be in [0, 100] (0: no previews), got {}",
+                                        c.preview_hz));
+  }
   root.optional("refuse_unknown_cameras", c.refuse_unknown_cameras);
   for (const auto& [key, value] : {std::pair{"robot_state_timeout_s", c.robot_state_timeout_s},
                                    std::pair{"world_state_timeout_s", c.world_state_timeout_s}}) {

@@ -81,6 +81,9 @@ struct CameraConfig {
   double robot_state_timeout_s = 1.0;
   double world_state_timeout_s = 1.0;
   bool refuse_unknown_cameras = true;
+  /// Copies on cell/vision/image_preview, at most this often, while a reader is matched
+  /// (monitors on other PCs); 0: none.
+  double preview_hz = 1.0;
 };
 
 /// Reads and validates the file. Errors: kConfig naming file:line:col, key, value and rule.

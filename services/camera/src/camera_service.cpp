@@ -60,6 +60,7 @@ CameraService::CameraService(service::Context& ctx, const CameraConfig& config)
       next_free_(steady_clock::now()),
       request_topic_(ctx.participant(), bus::topics::kImageRequest),
       image_topic_(ctx.participant(), bus::topics::kImage),
+      preview_topic_(ctx.participant(), bus::topics::kImagePreview),
       truth_topic_(ctx.participant(), bus::topics::kImageTruth),
       world_topic_(ctx.participant(), bus::topics::kWorldState),
       robot_topic_(ctx.participant(), bus::topics::kRobotState),
@@ -67,6 +68,7 @@ CameraService::CameraService(service::Context& ctx, const CameraConfig& config)
       photocell_topic_(ctx.participant(), bus::topics::kPhotocell),
       request_reader_(ctx.participant(), request_topic_, bus::topics::kImageRequest),
       image_writer_(ctx.participant(), image_topic_, bus::topics::kImage),
+      preview_writer_(ctx.participant(), preview_topic_, bus::topics::kImagePreview),
       truth_writer_(ctx.participant(), truth_topic_, bus::topics::kImageTruth),
       world_reader_(ctx.participant(), world_topic_, bus::topics::kWorldState),
       robot_reader_(ctx.participant(), robot_topic_, bus::topics::kRobotState),
@@ -366,6 +368,14 @@ void CameraService::publish_image(const Frame& frame, const std::optional<Reques
   img.belt_id = bus::borrow(config_.belt_id);
   if (auto s = image_writer_.write(img); !s) {
     log::warn("image", s.error().message, {{"camera", config_.camera_id}});
+  }
+  const auto now = steady_clock::now();
+  if (config_.preview_hz > 0.0 && now >= next_preview_ && preview_writer_.matched_readers() > 0) {
+    next_preview_ = now + std::chrono::duration_cast<steady_clock::duration>(
+                              std::chrono::duration<double>(1.0 / config_.preview_hz));
+    if (auto s = preview_writer_.write(img); !s) {
+      log::warn("image_preview", s.error().message, {{"camera", config_.camera_id}});
+    }
   }
 }
 

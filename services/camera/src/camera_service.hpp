@@ -96,6 +96,7 @@ class CameraService {
 
   bus::Topic<cell_vision_ImageRequest> request_topic_;
   bus::Topic<cell_vision_Image> image_topic_;
+  bus::Topic<cell_vision_Image> preview_topic_;
   bus::Topic<cell_vision_ImageTruth> truth_topic_;
   bus::Topic<cell_world_WorldState> world_topic_;
   bus::Topic<cell_robot_RobotState> robot_topic_;
@@ -103,6 +104,8 @@ class CameraService {
   bus::Topic<cell_world_PhotocellEvent> photocell_topic_;
   bus::Reader<cell_vision_ImageRequest> request_reader_;
   bus::Writer<cell_vision_Image> image_writer_;
+  bus::Writer<cell_vision_Image> preview_writer_;
+  std::chrono::steady_clock::time_point next_preview_{};
   bus::Writer<cell_vision_ImageTruth> truth_writer_;
   bus::Reader<cell_world_WorldState> world_reader_;
   bus::Reader<cell_robot_RobotState> robot_reader_;

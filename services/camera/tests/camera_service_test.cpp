@@ -22,6 +22,7 @@ using ::testing::HasSubstr;
 using testing::resting;
 using testing::WorldStateWire;
 
+using namespace std::chrono_literals;
 constexpr auto kWait = std::chrono::seconds(5);
 constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
@@ -232,6 +233,54 @@ TEST_F(CameraServiceTest, GrabsOnRequestWithTruthWhereTheImageShowsThePart) {
   EXPECT_NEAR(su / n, part.center_px.u_px, 2.0);
   EXPECT_NEAR(sv / n, part.center_px.v_px, 2.0);
   EXPECT_GE(camera.service().images_published(), 1U);
+}
+
+TEST_F(CameraServiceTest, PreviewsFollowTheFramesAtTheReducedRateForWhoeverReadsThem) {
+  CameraConfig config = eye_config();
+  config.preview_hz = 2.0;
+  cell::testing::ServiceHarness<CameraConfig, CameraService> camera(domain_, partition_,
+                                                                     config, "camera");
+  Bus b(domain_, partition_);
+  bus::Participant viewer(domain_, partition_);
+  bus::Topic<cell_vision_Image> preview_topic(viewer, bus::topics::kImagePreview);
+  bus::Reader<cell_vision_Image> previews(viewer, preview_topic, bus::topics::kImagePreview);
+  b.wait_matched();
+  ASSERT_TRUE(previews.wait_for_writers(1, kWait));
+  WorldStateWire w;
+  w.add_part("ic8", "dip20", cell_world_SHAPE_DIP, 26.16, 6.35, 3.81, 20, 0.1,
+             resting(134.39, 501.25, 750.0, -116.0), "table");
+  // Frames for 1.6 s, one every 100 ms: every one on cell/vision/image, at most one preview
+  // per 0.5 s (the first frame, then one per period: 4 at most). The preview reader keeps one
+  // sample (depth 1): count as they come.
+  int frames = 0;
+  int seen = 0;
+  const auto count_previews = [&] {
+    if (auto taken = previews.take_copies(64); taken) {
+      for (const auto& image : *taken) {
+        EXPECT_EQ(bus::str(image->camera_id), "ibm7545_eye");
+        EXPECT_EQ(image->data._length, 512U * 484U);
+        ++seen;
+      }
+    }
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - t0 < 1600ms) {
+    ASSERT_TRUE(b.world.write(w.finish(wall_time_ns(), 1, 750.0)));
+    b.publish_robot(kGrabPose, wall_time_ns(), false);
+    const std::uint64_t seq = b.request("ibm7545_eye", cell_vision_TRIGGER_NOW, false);
+    if (b.wait_for(b.images, [&](const auto& i) { return b.mine(i.request_id, seq); })) {
+      ++frames;
+    }
+    std::this_thread::sleep_for(50ms);
+    count_previews();
+    std::this_thread::sleep_for(50ms);
+  }
+  std::this_thread::sleep_for(200ms);
+  count_previews();
+  EXPECT_GE(frames, 8);
+  EXPECT_GE(seen, 2);
+  EXPECT_LE(seen, 4) << "previews are not rate-limited: " << seen << " for " << frames
+                     << " frames";
 }
 
 TEST_F(CameraServiceTest, EveryRequestIsAnsweredEvenTheImpossibleOnes) {

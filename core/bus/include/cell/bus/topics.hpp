@@ -69,6 +69,10 @@ inline constexpr TopicDef<cell_motion_MotionStatus> kMotionStatus{"cell/motion/s
                                                                   QosProfile::kState};
 // vision.idl
 inline constexpr TopicDef<cell_vision_Image> kImage{"cell/vision/image", QosProfile::kStream, 2};
+// The same images at a reduced rate (the camera's preview_hz), sent only while someone reads
+// them: what crosses to other PCs, where a multi-host profile keeps cell/vision/image home.
+inline constexpr TopicDef<cell_vision_Image> kImagePreview{"cell/vision/image_preview",
+                                                           QosProfile::kStream, 1};
 inline constexpr TopicDef<cell_vision_Detections> kDetections{"cell/vision/detections",
                                                               QosProfile::kStream, 8};
 inline constexpr TopicDef<cell_vision_EdgeRequest> kEdgeRequest{"cell/vision/edge_request",
