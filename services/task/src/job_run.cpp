@@ -311,6 +311,15 @@ Result<MotionOutcome> JobRun::move(cell_motion_MotionRequest& request,
         peers_changed(needed, gens)) {
       return recover_unseen(motion_id, o ? o->reason : o.error().message);
     }
+    // Planned from a state older than the robot (its gateway just restarted and came back
+    // elsewhere): the gateway refuses the start; plan again from the fresh state.
+    if (o && o->state == cell_motion_MOTION_FAILED &&
+        o->reason.find("trajectory starts with") != std::string::npos && attempt < 5) {
+      log::info("job", "planned from a stale robot state: planning again",
+                {{"job", job_id_}, {"why", o->reason}});
+      std::this_thread::sleep_for(500ms);
+      continue;
+    }
     if (!o || o->state != cell_motion_MOTION_REFUSED ||
         o->reason.find("is busy with motion") == std::string::npos || attempt == 5) {
       return o;
