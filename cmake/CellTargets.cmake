@@ -46,7 +46,9 @@ function(cell_add_test name)
   string(REPLACE ";" ";ENVIRONMENT;" env "${env}")
   set(props TIMEOUT ${ARG_TIMEOUT} ENVIRONMENT ${env})
   if(ARG_LABELS)
-    list(APPEND props LABELS "${ARG_LABELS}")
+    # The same flattening splits a label list: repeat the keyword before each label too.
+    string(REPLACE ";" ";LABELS;" labels "${ARG_LABELS}")
+    list(APPEND props LABELS ${labels})
   endif()
   if(ARG_SERIAL)  # timing-sensitive (a 1 kHz hard deadline): nothing else runs beside it
     list(APPEND props RUN_SERIAL TRUE)
