@@ -311,6 +311,13 @@ Result<MotionOutcome> JobRun::move(cell_motion_MotionRequest& request,
         peers_changed(needed, gens)) {
       return recover_unseen(motion_id, o ? o->reason : o.error().message);
     }
+    // The motion service gave up watching (it lost the robot's state, e.g. across a network
+    // partition just healed): that says nothing of what the arm did. Verify, never assume.
+    if (o && o->state == cell_motion_MOTION_FAILED && !o->robot_fault &&
+        (o->reason.find("lost the state of robot") != std::string::npos ||
+         o->reason.find("did not accept the trajectory") != std::string::npos)) {
+      return recover_unseen(motion_id, o->reason);
+    }
     // Planned from a state older than the robot (its gateway just restarted and came back
     // elsewhere): the gateway refuses the start; plan again from the fresh state.
     if (o && o->state == cell_motion_MOTION_FAILED &&
@@ -320,8 +327,14 @@ Result<MotionOutcome> JobRun::move(cell_motion_MotionRequest& request,
       std::this_thread::sleep_for(500ms);
       continue;
     }
-    if (!o || o->state != cell_motion_MOTION_REFUSED ||
-        o->reason.find("is busy with motion") == std::string::npos || attempt == 5) {
+    // Busy: refused by the motion service (a motion of ours from before a restart still runs)
+    // or by the gateway (a restarted motion service re-ran a request it had taken before).
+    const bool busy =
+        o && ((o->state == cell_motion_MOTION_REFUSED &&
+               o->reason.find("is busy with motion") != std::string::npos) ||
+              (o->state == cell_motion_MOTION_FAILED &&
+               o->reason.find("is busy with trajectory") != std::string::npos));
+    if (!busy || attempt == 5) {
       return o;
     }
     log::info("job", "robot busy with an earlier motion: waiting for it",
