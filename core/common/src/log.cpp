@@ -60,13 +60,26 @@ bool needs_quotes(std::string_view value) {
   return false;
 }
 
+constexpr std::size_t kMaxValueBytes = 512;
+
 void append_value(std::string& out, std::string_view value, bool force_quotes) {
-  if (!force_quotes && !needs_quotes(value)) {
-    out += value;
+  // A value from the bus can be a megabyte of garbage: keep the head, say how long it was, so
+  // a flood of bad samples cannot fill the disk through the log.
+  std::string_view shown = value;
+  if (value.size() > kMaxValueBytes) {
+    std::size_t cut = kMaxValueBytes;
+    while (cut > 0 && (static_cast<unsigned char>(value[cut]) & 0xC0U) == 0x80U) {
+      --cut;  // never split a UTF-8 sequence
+    }
+    shown = value.substr(0, cut);
+    force_quotes = true;
+  }
+  if (!force_quotes && !needs_quotes(shown)) {
+    out += shown;
     return;
   }
   out += '"';
-  for (const char c : value) {
+  for (const char c : shown) {
     switch (c) {
       case '"':
         out += "\\\"";
@@ -83,6 +96,11 @@ void append_value(std::string& out, std::string_view value, bool force_quotes) {
       default:
         out += c;
     }
+  }
+  if (shown.size() != value.size()) {
+    out += "...(";
+    out += std::to_string(value.size());
+    out += " bytes)";
   }
   out += '"';
 }

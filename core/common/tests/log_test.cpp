@@ -34,5 +34,17 @@ TEST(LogLevel, ParsesKnownNamesOnly) {
   EXPECT_EQ(level, Level::kDebug);
 }
 
+TEST(LogFormat, HugeValuesAreCutAndSayHowLongTheyWere) {
+  const std::string huge(1 << 20, 'x');
+  const std::string accents = std::string(511, 'a') + "\xc3\xa9tail";  // e-acute at 511..512
+  const std::string line =
+      format_line(Level::kWarn, "task", "reject", huge, {{"spec", accents}, {"ok", "short"}});
+  EXPECT_LT(line.size(), 1300U);
+  EXPECT_NE(line.find(std::string(512, 'x') + "...(1048576 bytes)\""), std::string::npos) << line;
+  EXPECT_NE(line.find("spec=\"" + std::string(511, 'a') + "...(517 bytes)\""), std::string::npos)
+      << "a UTF-8 sequence was split";
+  EXPECT_NE(line.find(" ok=short"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace cell::log

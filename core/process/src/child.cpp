@@ -99,7 +99,19 @@ Result<Child> Child::spawn(const SpawnOptions& options) {
       env_store.push_back(entry);
     }
   }
-  env_store.insert(env_store.end(), options.env.begin(), options.env.end());
+  // Within options.env a later entry for a key replaces an earlier one (a test adds its own
+  // CYCLONEDDS_URI after the defaults): getenv() would otherwise see the first.
+  for (std::size_t i = 0; i < options.env.size(); ++i) {
+    const std::string& entry = options.env[i];
+    const auto eq = entry.find('=');
+    bool replaced_later = false;
+    for (std::size_t k = i + 1; k < options.env.size() && !replaced_later; ++k) {
+      replaced_later = options.env[k].compare(0, eq + 1, entry, 0, eq + 1) == 0;
+    }
+    if (!replaced_later) {
+      env_store.push_back(entry);
+    }
+  }
   std::vector<char*> envp;
   for (auto& e : env_store) {
     envp.push_back(e.data());

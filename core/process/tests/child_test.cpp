@@ -39,6 +39,17 @@ TEST(Child, PassesExtraEnvironment) {
   EXPECT_EQ(child->output(), "hello\n");
 }
 
+TEST(Child, ALaterEnvironmentEntryReplacesAnEarlierOne) {
+  setenv("CELL_Y", "parent", 1);
+  auto child = Child::spawn({.executable = "sh",
+                             .args = {"-c", "env | grep -c '^CELL_Y=' ; echo $CELL_Y"},
+                             .env = {"CELL_Y=default", "CELL_Z=z", "CELL_Y=mine"}});
+  unsetenv("CELL_Y");
+  ASSERT_TRUE(child);
+  ASSERT_TRUE(child->wait_for(std::chrono::seconds(10)));
+  EXPECT_EQ(child->output(), "1\nmine\n");
+}
+
 TEST(Child, StopEscalatesToKillWhenTermIsIgnored) {
   auto child =
       Child::spawn({.executable = "sh", .args = {"-c", "trap '' TERM; echo ready; sleep 30"}});

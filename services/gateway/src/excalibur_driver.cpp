@@ -290,7 +290,7 @@ Status ExcaliburDriver::command(DriverCommand command, const CommandArgs& args) 
       const auto& d = dialect_->defaults();
       if (!(q.tolerance_deg >= d.min_tolerance_deg && q.tolerance_deg <= d.max_tolerance_deg)) {
         return Error{Errc::kInvalidArgument,
-                     fmt::format("tolerance {:.3f} deg is outside the controller's range [{}, {}] "
+                     fmt::format("tolerance {:.4g} deg is outside the controller's range [{}, {}] "
                                  "deg",
                                  q.tolerance_deg, d.min_tolerance_deg, d.max_tolerance_deg)};
       }

@@ -42,7 +42,8 @@ inline void error(std::string_view event, std::string_view message,
   write(Level::kError, event, message, fields);
 }
 
-/// Formats one structured line without writing it (used by write(); exposed for tests).
+/// Formats one structured line without writing it (used by write(); exposed for tests). A
+/// message or value longer than 512 bytes is cut there and ends "...(N bytes)".
 std::string format_line(Level level, std::string_view service, std::string_view event,
                         std::string_view message, std::initializer_list<Field> fields);
 

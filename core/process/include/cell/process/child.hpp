@@ -16,6 +16,7 @@ struct SpawnOptions {
   std::string executable;                ///< path, or a name looked up in PATH
   std::vector<std::string> args;         ///< argv[1..]
   std::vector<std::string> env;          ///< extra "KEY=VALUE" entries over the parent's env
+                                         ///< (a later entry for a key wins)
   std::string working_dir;               ///< empty: inherit
   bool capture_output = true;            ///< stdout+stderr into one pipe (read via output_fd)
   bool new_process_group = true;         ///< child leads its own group (signals reach its tree)
