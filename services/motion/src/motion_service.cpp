@@ -431,8 +431,24 @@ void MotionService::supervise() {
       continue;
     }
     if (v.trajectory_id != a.trajectory_id) {
-      continue;  // the gateway has not started it yet
+      if (!a.started) {
+        continue;  // the gateway has not started it yet
+      }
+      // It ran and the robot now names another (or none): its gateway restarted or dropped it.
+      // A state or two out of order is no verdict; 0.3 s of it is.
+      if (a.mismatch_since == SteadyTime{}) {
+        a.mismatch_since = steady_clock::now();
+      } else if (seconds_since(a.mismatch_since) > 0.3) {
+        const Error error{Errc::kProtocol,
+                          fmt::format("robot '{}' stopped running trajectory '{}' (its state names "
+                                      "'{}'): the gateway restarted or dropped it",
+                                      id, a.trajectory_id, v.trajectory_id)};
+        finish(robot, cell_motion_MOTION_FAILED, &error);
+      }
+      continue;
     }
+    a.started = true;
+    a.mismatch_since = SteadyTime{};
     if (v.mode == cell_robot_MODE_FAULT) {
       const Error error{Errc::kProtocol, fmt::format("robot '{}' faulted: {}", id, v.fault_text)};
       finish(robot, cell_motion_MOTION_FAILED, &error);

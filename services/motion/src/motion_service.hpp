@@ -52,6 +52,8 @@ class MotionService {
     std::string trajectory_id;
     std::uint64_t gateway_seq = 0;
     bool gateway_accepted = false;
+    bool started = false;         // the robot's state has named this trajectory
+    SteadyTime mismatch_since{};  // since when, after it started, the state names another
     SteadyTime sent{};
     double duration_s = 0.0;
     std::vector<double> final_joints;
