@@ -85,9 +85,18 @@ class ConveyorJob {
     // is queued here, so a part that passes while the robot is busy is still seen, and still
     // accounted for (taken, or counted by why not).
     (void)run_.links().take_frames(spec_.camera);  // frames from before the job: not ours
+    // Every service a pick needs: while one is lost (a partition, a crash) the job pauses and
+    // the parts that pass meanwhile are counted (outside the window when it resumes).
+    std::vector<std::string> needed = run_.motion_peers();
+    for (auto& id : run_.locate_peers(spec_.camera)) {
+      needed.push_back(std::move(id));
+    }
     bool ready = false;
     for (;;) {
       if (auto r = stop_if(run_.hold_if_paused()); r) {
+        return *r;
+      }
+      if (auto r = stop_if(run_.wait_for_peers(needed)); r) {
         return *r;
       }
       if (finished()) {
