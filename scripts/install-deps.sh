@@ -10,7 +10,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libyaml-cpp-dev libspdlog-dev libfmt-dev libcli11-dev nlohmann-json3-dev
   liborocos-kdl-dev libsqlite3-dev
-  valgrind procps iproute2 openssl nftables util-linux systemd
+  valgrind procps iproute2 openssl nftables util-linux systemd jq
   libcpp-httplib-dev chromium
 )
 

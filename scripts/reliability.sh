@@ -13,6 +13,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${CELL_BUILD_DIR:-$root/build}"
 doc="$root/docs/reliability.md"
 
+"$root/scripts/install-deps.sh" || { echo "reliability.sh: scripts/install-deps.sh failed" >&2; exit 1; }
 CMAKE_BUILD_PARALLEL_LEVEL=2 flock /tmp/cell-build.lock "$root/scripts/build.sh" || { echo "reliability.sh: scripts/build.sh failed" >&2; exit 1; }
 
 out="$(mktemp -d /tmp/cell-reliability-XXXXXX)"
