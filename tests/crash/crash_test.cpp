@@ -1,9 +1,9 @@
 // Issue 11, "killed services": the simulated cell run under the launcher (`cell up`, which
 // restarts a service that dies), a table job of six ICs, and kill -9 of each service the job
-// needs (task, motion, gateway.ibm7545, camera.ibm7545_eye, vision, calibration) twice, in
-// turn, while it runs. The job must succeed, every IC must lie in its own slot (cell-sim-world's
-// truth), every IC must have been grasped exactly once (the world's log), and the journal must
-// hold the job once.
+// needs twice, in turn, while it runs: task, motion, camera.ibm7545_eye, vision, calibration on
+// the ideal 7545 (the gateway: see the test's comment). The job must
+// succeed, every IC must lie in its own slot (cell-sim-world's truth), every IC must have been
+// grasped exactly once (the world's log), and the journal must hold the job once.
 //
 // The simulators (sim-world, sim-7545) are left alone: they are the physical world (the table
 // with its parts, the arm and its slave board). Killing them would not be a software crash the
@@ -22,6 +22,7 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -96,7 +97,7 @@ class CrashTest : public ::testing::Test {
       EXPECT_EQ(down.exit.code, 0) << down.output;
     }
     if (HasFailure()) {
-      for (const char* name : {"task", "motion", "gateway.ibm7545", "sim-world"}) {
+      for (const char* name : {"task", "motion", "gateway.ibm7545", "sim-7545", "sim-world"}) {
         const std::string log = read_text(dir_ + "/run/logs/" + name + ".log");
         std::printf("---- %s (last 6000 chars)\n%s\n", name,
                     log.substr(log.size() > 6000 ? log.size() - 6000 : 0).c_str());
@@ -118,17 +119,32 @@ class CrashTest : public ::testing::Test {
   }
 
   /// The profile: deploy/local.yaml's services the table job needs, configs in the temp dir
-  /// (journal, calibration store, a private DPR segment name so a concurrent 7545 test never
-  /// shares the slave board).
-  void write_profile() {
-    // The 7545 on the ideal driver (as tests/task and tests/netlab do): the DPR handshake's
-    // 1 ms deadline misses ("loop late") on a loaded 2-core machine stall the job for an
-    // operator reset, which is the 7545 tests' subject (tests/gateway_7545), not this one's.
-    write("gateway.yaml",
-          "service: {id: gateway.ibm7545}\n"
-          "robot_config: config/robots/ibm7545.yaml\n"
-          "supervisors: [task]\n"
-          "driver: {kind: ideal, initial_joints: [45, 105, 0, 0], gripper_time_s: 0.2}\n");
+  /// (journal, calibration store). `dpr`: the 7545 as on the real cell, its slave board
+  /// simulated (cell-sim-7545, a private shared-memory name so a concurrent 7545 test never
+  /// shares it) and the DPR driver at a 2 ms sample period (as tests/gateway_7545 runs on
+  /// this VM, whose bare 1 ms loop wakes late a few times a second); otherwise the ideal
+  /// driver (tests/task, tests/netlab).
+  void write_profile(bool dpr) {
+    std::string robots;
+    if (dpr) {
+      const std::string shm = fmt::format("/cell-dpr7545-crash-{}", ::getpid());
+      write("sim-7545.yaml", replaced(shipped("config/sim-7545.yaml"), "shm_name: /cell-dpr7545",
+                                      "shm_name: " + shm));
+      std::string gw = replaced(shipped("config/gateway-ibm7545-dpr.yaml"),
+                                "shm_name: /cell-dpr7545", "shm_name: " + shm);
+      gw = replaced(gw, "sample_period_us: 1000", "sample_period_us: 2000");
+      gw = replaced(gw, "cycle_hz: 1000", "cycle_hz: 500");
+      write("gateway.yaml", gw);
+      robots = "  - {name: sim-7545, exec: cell-sim-7545, config: " + dir_ + "/sim-7545.yaml}\n";
+    } else {
+      // The ideal driver: the DPR handshake's deadline misses on a loaded machine ("loop
+      // late") would stall the job for an operator reset; that is tests/gateway_7545's subject.
+      write("gateway.yaml",
+            "service: {id: gateway.ibm7545}\n"
+            "robot_config: config/robots/ibm7545.yaml\n"
+            "supervisors: [task]\n"
+            "driver: {kind: ideal, initial_joints: [45, 105, 0, 0], gripper_time_s: 0.2}\n");
+    }
     write("sim-world.yaml",
           "service: {id: sim-world}\nscene: " + write("scene.yaml", R"(name: scatter_table
 table: {height_mm: 750, x_mm: [-600, 600], y_mm: [-150, 750], reflectance: 0.9}
@@ -148,7 +164,7 @@ run_dir: {}/run
 restart: {{backoff_initial_s: 0.5, backoff_max_s: 4, stable_after_s: 5}}
 stop_grace_s: 5
 services:
-  - {{name: gateway.ibm7545, exec: cell-gateway, config: {d}/gateway.yaml}}
+{robots}  - {{name: gateway.ibm7545, exec: cell-gateway, config: {d}/gateway.yaml}}
   - {{name: motion, exec: cell-motion, config: {s}/config/motion.yaml}}
   - {{name: sim-world, exec: cell-sim-world, config: {d}/sim-world.yaml}}
   - {{name: camera.ibm7545_eye, exec: cell-camera, config: {s}/config/camera-ibm7545.yaml}}
@@ -157,7 +173,7 @@ services:
   - {{name: task, exec: cell-task, config: {d}/task.yaml}}
 )",
                                                domain_, partition_, dir_, fmt::arg("d", dir_),
-                                               fmt::arg("s", src)));
+                                               fmt::arg("s", src), fmt::arg("robots", robots)));
   }
 
   /// The simulator's truth as the eye-in-hand camera's calibration, in the store before the
@@ -205,6 +221,8 @@ services:
     return json::object();
   }
 
+  void run_with_kills(bool dpr, const std::vector<std::string>& order, const std::string& label);
+
   std::uint32_t domain_;
   std::string partition_;
   std::string dir_;
@@ -213,8 +231,11 @@ services:
   bool up_ = false;
 };
 
-TEST_F(CrashTest, EveryServiceKilledTwiceDuringATableJobLosesNothingAndDoesNothingTwice) {
-  write_profile();
+/// Runs a table job under the launcher and kill -9s each of `order` twice, in turn, while it
+/// runs; checks that nothing was lost or done twice. `label` names the scenario's rows.
+void CrashTest::run_with_kills(bool dpr, const std::vector<std::string>& order,
+                               const std::string& label) {
+  write_profile(dpr);
   store_truth_calibration();
   ASSERT_FALSE(HasFailure());
   const ToolRun up =
@@ -243,12 +264,6 @@ TEST_F(CrashTest, EveryServiceKilledTwiceDuringATableJobLosesNothingAndDoesNothi
   // Let it start (the 7545 homes first) before the first kill.
   ASSERT_TRUE(eventually([&] { return job("crash-1").value("steps", 0) >= 2; }, 120s));
 
-  // gateway.ibm7545 is not killed here: the ideal driver keeps no arm to come back to, and with
-  // the DPR driver a restart mid-motion left the new master and sim-7545 disagreeing about the
-  // arm (every re-plan refused as starting elsewhere) — an open defect of the 7545 driver's
-  // re-engagement (closing note of issue 11).
-  const std::vector<std::string> order = {"motion", "camera.ibm7545_eye", "vision", "task",
-                                          "calibration"};
   std::vector<Kill> kills;
   bool ended_early = false;
   for (int round = 0; round < 2 && !ended_early; ++round) {
@@ -387,7 +402,7 @@ TEST_F(CrashTest, EveryServiceKilledTwiceDuringATableJobLosesNothingAndDoesNothi
     std::ofstream f(std::string(out) + "/crash.jsonl", std::ios::app);
     for (const Kill& k : kills) {
       f << json{{"suite", "crash"},
-                {"scenario", "kill -9 " + k.service + " during a table job"},
+                {"scenario", "kill -9 " + k.service + " during a table job (" + label + ")"},
                 {"load", fmt::format("table job crash-1, {} ICs, under cell up", kParts)},
                 {"faults", fmt::format("SIGKILL {} at {:.1f} s (pid {}), during '{}'", k.service,
                                        k.at_s, k.old_pid, k.step_at_kill)},
@@ -401,11 +416,11 @@ TEST_F(CrashTest, EveryServiceKilledTwiceDuringATableJobLosesNothingAndDoesNothi
         << "\n";
     }
     f << json{{"suite", "crash"},
-              {"scenario", fmt::format("table job through {} kills (each service twice)",
-                                       kills.size())},
+              {"scenario", fmt::format("table job through {} kills, each service twice ({})",
+                                       kills.size(), label)},
               {"load", fmt::format("table job, {} ICs, under cell up", kParts)},
-              {"faults", fmt::format("{} kill -9: motion, camera.ibm7545_eye, vision, task, "
-                                     "calibration", kills.size())},
+              {"faults", fmt::format("{} kill -9 ({}): {}", kills.size(), label,
+                                     fmt::join(order, ", "))},
               {"outcome", fmt::format("{}: job {}, {} of {} placed, worst slot error {:.3f} mm, "
                                       "{} grasps",
                                       HasFailure() ? "failed" : "passed",
@@ -416,6 +431,18 @@ TEST_F(CrashTest, EveryServiceKilledTwiceDuringATableJobLosesNothingAndDoesNothi
                 .dump()
       << "\n";
   }
+}
+
+
+// Every service the job needs except the robot's gateway, on the ideal 7545. The ideal driver
+// is the arm itself: killing its gateway would make the arm vanish. Killed with the 7545 on its
+// DPR slave board (run_with_kills(true, {"gateway.ibm7545"}, ...)), the job does not survive
+// yet: the new master finds the arm unhomed and, after re-homing, faults on Z torque (a 20.5
+// count position error at takeover), and a motion refused for that fault fails the job instead
+// of pausing it. Open defect, in the closing note of issue 11.
+TEST_F(CrashTest, EveryServiceKilledTwiceDuringATableJobLosesNothingAndDoesNothingTwice) {
+  run_with_kills(false, {"motion", "camera.ibm7545_eye", "vision", "task", "calibration"},
+                 "ideal 7545");
 }
 
 }  // namespace
