@@ -5,6 +5,8 @@
 # machine, how to rerun. Needs root for the network lab (tests/netlab: namespaces, tun, nft).
 #
 #   ./scripts/reliability.sh [extra ctest arguments, e.g. -R netlab]
+#   ./scripts/reliability.sh --from DIR CTEST_LOG   # only write the doc, from the rows a run
+#                                                   # with CELL_RELIABILITY_OUT=DIR left
 #
 # Exit code: ctest's (0 when every reliability test passed); the doc is written either way.
 set -uo pipefail
@@ -13,18 +15,29 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${CELL_BUILD_DIR:-$root/build}"
 doc="$root/docs/reliability.md"
 
-"$root/scripts/install-deps.sh" || { echo "reliability.sh: scripts/install-deps.sh failed" >&2; exit 1; }
-CMAKE_BUILD_PARALLEL_LEVEL=2 flock /tmp/cell-build.lock "$root/scripts/build.sh" || { echo "reliability.sh: scripts/build.sh failed" >&2; exit 1; }
+if [ "${1:-}" = "--from" ]; then
+  out="${2:?--from DIR CTEST_LOG}"
+  log="${3:?--from DIR CTEST_LOG}"
+  started="$(date -u -r "$log" +%Y-%m-%dT%H:%M:%SZ)"
+  elapsed="(see the log)"
+  rc=$(grep -q 'tests failed out of' "$log" && grep -qE '^100% tests passed' "$log"; echo $?)
+  source_note="rows of the run whose ctest log is $log"
+else
+  "$root/scripts/install-deps.sh" || { echo "reliability.sh: scripts/install-deps.sh failed" >&2; exit 1; }
+  CMAKE_BUILD_PARALLEL_LEVEL=2 flock /tmp/cell-build.lock "$root/scripts/build.sh" || { echo "reliability.sh: scripts/build.sh failed" >&2; exit 1; }
 
-out="$(mktemp -d /tmp/cell-reliability-XXXXXX)"
-started="$(date -u +%Y-%m-%dT%H:%M:%SZ)"
-t0=$(date +%s)
-CELL_RELIABILITY_OUT="$out" ctest --test-dir "$build" -L reliability --output-on-failure "$@" \
-  >"$out/ctest.log" 2>&1
-rc=$?
-elapsed=$(( $(date +%s) - t0 ))
-summary="$(grep -E '^[0-9]+% tests passed|tests failed out of' "$out/ctest.log" | tail -1)"
-failed="$(sed -n '/The following tests FAILED/,$p' "$out/ctest.log" | grep -E '^\s+[0-9]+ - ' || true)"
+  out="$(mktemp -d /tmp/cell-reliability-XXXXXX)"
+  started="$(date -u +%Y-%m-%dT%H:%M:%SZ)"
+  t0=$(date +%s)
+  CELL_RELIABILITY_OUT="$out" ctest --test-dir "$build" -L reliability --output-on-failure "$@" \
+    >"$out/ctest.log" 2>&1
+  rc=$?
+  elapsed="$(( $(date +%s) - t0 )) s"
+  log="$out/ctest.log"
+  source_note="\`ctest -L reliability\`"
+fi
+summary="$(grep -E '^[0-9]+% tests passed|tests failed out of' "$log" | tail -1)"
+failed="$(sed -n '/The following tests FAILED/,$p' "$log" | grep -E '^\s+[0-9]+ - ' || true)"
 
 rows=$(cat "$out"/*.jsonl 2>/dev/null | grep -c . || true)
 suites=$(cd "$out" && ls *.jsonl 2>/dev/null | sed 's/\.jsonl$//' | tr '\n' ' ')
@@ -46,7 +59,7 @@ suites=$(cd "$out" && ls *.jsonl 2>/dev/null | sed 's/\.jsonl$//' | tr '\n' ' ')
     echo "| (none) | no reliability test wrote a row | | | | | |"
   fi
   echo
-  echo "ctest: ${summary:-no summary (see the log)} in ${elapsed} s, exit code $rc."
+  echo "ctest ($source_note): ${summary:-no summary (see the log)} in ${elapsed}, exit code $rc."
   if [ -n "$failed" ]; then
     echo
     echo "Failed tests:"
@@ -74,5 +87,5 @@ suites=$(cd "$out" && ls *.jsonl 2>/dev/null | sed 's/\.jsonl$//' | tr '\n' ' ')
   echo "the router, loss and partitions from nftables inside the namespaces."
 } >"$doc"
 
-echo "reliability.sh: $rows rows from ${suites:-no suite} -> $doc (ctest exit $rc; log $out/ctest.log)"
+echo "reliability.sh: $rows rows from ${suites:-no suite} -> $doc (ctest exit $rc; log $log)"
 exit $rc
