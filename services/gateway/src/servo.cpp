@@ -405,10 +405,6 @@ void Servo::cycle(Clock::time_point now) {
   if (mode_ == cell_robot_MODE_IDLE && measured_.busy && !measured_.homed) {
     mode_ = cell_robot_MODE_HOMING;
   } else if (mode_ == cell_robot_MODE_HOMING && !measured_.busy) {
-    // Homing moved the arm by itself (the controller's own search): hold where it ended, so
-    // the next plan, made from the measured joints, starts at the setpoint.
-    setpoint_.q = measured_.q;
-    setpoint_.qd.setZero();
     mode_ = cell_robot_MODE_IDLE;
   }
 
