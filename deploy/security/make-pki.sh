@@ -107,12 +107,12 @@ for role in "${!role_include[@]}"; do
   done
 done
 for role in "${!role_known[@]}"; do  # an include cycle would recurse for ever
-  todo="${role}" seen=" "
-  while [[ -n "${todo// /}" ]]; do
-    read -r cur todo <<<"${todo}"
+  queue="${role}" seen=" "
+  while [[ -n "${queue// /}" ]]; do
+    read -r cur queue <<<"${queue}"
     for inc in ${role_include[${cur}]:-}; do
       [[ "${inc}" != "${role}" ]] || die "${roles_file}: role '${role}' includes itself (through '${cur}')"
-      [[ "${seen}" == *" ${inc} "* ]] || { seen+="${inc} "; todo+=" ${inc}"; }
+      [[ "${seen}" == *" ${inc} "* ]] || { seen+="${inc} "; queue+=" ${inc}"; }
     done
   done
 done
