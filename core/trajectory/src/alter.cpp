@@ -1,5 +1,7 @@
 #include "cell/trajectory/alter.hpp"
 
+#include <algorithm>
+
 namespace cell::trajectory {
 
 void AlterState::submit(const AlterCorrection& correction) noexcept {
@@ -26,7 +28,8 @@ void AlterState::begin_cycle() noexcept {
 
 AlterCorrection AlterState::effective_at(double now_s) const noexcept {
   AlterCorrection out = effective_;
-  out.translation_mm += effective_.velocity_mm_s * (now_s - effective_.stamp_s);
+  const double dt = std::min(now_s - effective_.stamp_s, kExtrapolationHorizonS);
+  out.translation_mm += effective_.velocity_mm_s * dt;
   out.stamp_s = now_s;
   return out;
 }

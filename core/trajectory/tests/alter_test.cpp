@@ -90,6 +90,19 @@ TEST(AlterState, ExtrapolatesWithTheCorrectionRate) {
   EXPECT_NEAR(alter.effective_at(1.004).translation_mm.y(), -108.0, 1e-9);
 }
 
+// A sender that falls silent leaves the arm at most rate * horizon past its last correction.
+TEST(AlterState, StopsExtrapolatingAfterTheHorizon) {
+  AlterState alter;
+  AlterCorrection c = dy(-100, 1.0);
+  c.velocity_mm_s = Eigen::Vector3d(0, -500, 0);
+  alter.submit(c);
+  alter.begin_cycle();
+  const double h = AlterState::kExtrapolationHorizonS;
+  EXPECT_NEAR(alter.effective_at(1.0 + h / 2).translation_mm.y(), -100.0 - 500 * h / 2, 1e-9);
+  EXPECT_NEAR(alter.effective_at(1.0 + h).translation_mm.y(), -100.0 - 500 * h, 1e-9);
+  EXPECT_NEAR(alter.effective_at(3.0).translation_mm.y(), -100.0 - 500 * h, 1e-9);
+}
+
 // At the end the robot rests at the planned destination plus the total correction (V+ ALTOFF).
 TEST(TrajectoryExecutor, RestsAtDestinationPlusTotalCorrection) {
   testing::Gantry g;

@@ -550,17 +550,27 @@ class ConveyorJob {
                                      {"met", part_met ? "yes" : "no"},
                                      {"tracking", v.tracking ? "yes" : "no"}});
     }
-    if (auto closed = run_.links().command(robot_id, cell_robot_CMD_GRIPPER_CLOSE, 2000ms);
+    // Corrections go on while the command and its answer travel (tens of ms to a few hundred
+    // over a lossy link: the gateway's extrapolation alone would stop after its horizon).
+    if (auto closed = run_.links().command(robot_id, cell_robot_CMD_GRIPPER_CLOSE, 2000ms,
+                                           send_alter);
         !closed) {
       run_.count("motion_failed");
       record(part, cell_task_PART_MISSED, closed.error().message);
       return recover_after_stop();
     }
+    if (escaped) {
+      // The arm held at the window's limit while the command travelled: whatever the gripper
+      // closed on, this is not a grip at the part's grasp point. Let it go.
+      (void)run_.links().command(robot_id, cell_robot_CMD_GRIPPER_OPEN, 2000ms);
+      return let_go("the part left the window while the gripper closed");
+    }
     const auto grip_end = Clock::now() + std::chrono::duration<double>(spec_.dwell_s);
     while (Clock::now() < grip_end) {
       send_alter();
     }
-    (void)run_.links().command(robot_id, cell_robot_CMD_ALTER_OFF, 2000ms);
+    // Following the held part until ALTOFF lands (held at the window's limit at the most).
+    (void)run_.links().command(robot_id, cell_robot_CMD_ALTER_OFF, 2000ms, send_alter);
     // The depart starts where ALTER left the arm: wait for it to rest there (a state taken
     // while it still followed the belt would be refused by the gateway).
     (void)run_.links().wait_robot(

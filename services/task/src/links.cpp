@@ -229,7 +229,9 @@ Result<MotionOutcome> Links::move(cell_motion_MotionRequest& request, const Cont
         if (terminal(s->state)) {
           MotionOutcome o = outcome_of(s.get());
           o.interrupted = stop_sent ? Interrupt::kCancel : Interrupt::kNone;
-          if (o.state == cell_motion_MOTION_FAILED) {
+          // Failed, or refused before it started (the motion service will not plan for a
+          // robot in fault): either way the robot's fault, and the job pauses for it.
+          if (o.state == cell_motion_MOTION_FAILED || o.state == cell_motion_MOTION_REFUSED) {
             const RobotView v = robot(robot_id);
             o.robot_fault = v.mode == cell_robot_MODE_FAULT ||
                             v.mode == cell_robot_MODE_STOPPED;
@@ -447,6 +449,40 @@ Status Links::command(const std::string& robot_id, cell_robot_RobotCommandKind k
   return command(c, timeout);
 }
 
+Status Links::command(const std::string& robot_id, cell_robot_RobotCommandKind kind,
+                      std::chrono::milliseconds timeout, const std::function<void()>& between) {
+  cell_robot_RobotCommand c{};
+  c.robot_id = bus::borrow(robot_id);
+  c.kind = kind;
+  const auto deadline = Clock::now() + timeout;
+  auto seq = commands_.send(c, timeout);
+  if (!seq) {
+    return Error{Errc::kProtocol,
+                 fmt::format("robot '{}' command: {}", robot_id, seq.error().message)};
+  }
+  for (;;) {
+    // A deadline of now: take what has arrived, never block (between() paces the loop).
+    auto reply = commands_.wait_reply(*seq, Clock::now());
+    if (reply) {
+      return command_answer(robot_id, *reply);
+    }
+    if (reply.error().code != Errc::kTimeout || Clock::now() >= deadline) {
+      return Error{Errc::kProtocol,
+                   fmt::format("robot '{}' command: {}", robot_id, reply.error().message)};
+    }
+    between();
+  }
+}
+
+Status Links::command_answer(const std::string& robot_id,
+                             const bus::Owned<cell_robot_RobotCommandReply>& reply) {
+  if (!reply->status.accepted) {
+    return Error{Errc::kNotReady, fmt::format("robot '{}' refused the command: {}", robot_id,
+                                              bus::str(reply->status.reason))};
+  }
+  return ok_status();
+}
+
 Status Links::command(cell_robot_RobotCommand& c, std::chrono::milliseconds timeout) {
   const std::string robot_id(bus::str(c.robot_id));
   auto reply = commands_.call(c, timeout);
@@ -454,11 +490,7 @@ Status Links::command(cell_robot_RobotCommand& c, std::chrono::milliseconds time
     return Error{Errc::kProtocol,
                  fmt::format("robot '{}' command: {}", robot_id, reply.error().message)};
   }
-  if (!(*reply)->status.accepted) {
-    return Error{Errc::kNotReady, fmt::format("robot '{}' refused the command: {}", robot_id,
-                                              bus::str((*reply)->status.reason))};
-  }
-  return ok_status();
+  return command_answer(robot_id, *reply);
 }
 
 }  // namespace cell::task_service

@@ -220,6 +220,11 @@ class Links {
                  std::chrono::milliseconds timeout);
   /// The same for a command with its parameters filled in (lights, gripper width, ...).
   Status command(cell_robot_RobotCommand& command, std::chrono::milliseconds timeout);
+  /// The same, calling `between` until the answer comes (it paces itself: e.g. one ALTER
+  /// correction per cycle, so a gripper closing on a tracked part keeps following it however
+  /// long the link takes to carry the command and its answer).
+  Status command(const std::string& robot_id, cell_robot_RobotCommandKind kind,
+                 std::chrono::milliseconds timeout, const std::function<void()>& between);
 
   const std::string& client_id() const noexcept { return motions_.client_id(); }
 
@@ -227,6 +232,8 @@ class Links {
   Peers& peers() noexcept { return peers_; }
 
  private:
+  static Status command_answer(const std::string& robot_id,
+                               const bus::Owned<cell_robot_RobotCommandReply>& reply);
   void take_states();
   void take_belts();
 

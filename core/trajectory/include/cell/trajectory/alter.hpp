@@ -42,7 +42,15 @@ class AlterState {
   /// Closes the cycle: folds the pending correction (if any) into the effective one.
   void begin_cycle() noexcept;
 
-  /// The effective correction extrapolated to `now_s` with its rate (translation only).
+  /// How far past its stamp a correction is extrapolated with its rate [s]. A sender that
+  /// falls silent (a lost link, a crashed task, the last correction before ALTOFF) leaves the
+  /// arm at most rate * horizon beyond its last correction, never running on with the belt
+  /// (netlab: an ALTOFF retransmitted after 50 ms delay and loss let a 500 mm/s track run 62 mm
+  /// out of reach). 0.15 s covers a correction every 16 ms over a 100 ms link.
+  static constexpr double kExtrapolationHorizonS = 0.15;
+
+  /// The effective correction extrapolated to `now_s` with its rate (translation only), for at
+  /// most kExtrapolationHorizonS past its stamp.
   AlterCorrection effective_at(double now_s) const noexcept;
 
   /// Applies `correction` to a nominal pose: in the world frame C * base_T_tool (rotation about
