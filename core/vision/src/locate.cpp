@@ -582,6 +582,24 @@ bool Locator::Impl::explained(const Fit& fit) const {
   return fit.matched || !mapper->metric() || options.classes.empty();
 }
 
+namespace {
+
+/// Enough crossings on the four sides for a quadrilateral: at least two on each side and six on
+/// one pair of opposite sides (which share a direction). On a coarse camera (the belt's 2
+/// px/mm) a DIP's short sides keep only two or three clean crossings each, and its long sides,
+/// between the leads, a few more: the long pair gives the direction (with the short pair, which
+/// is square to it for a rectangle), and each short side's two fix its offset.
+bool enough_crossings(const std::array<std::vector<Eigen::Vector2d>, 4>& sides) {
+  for (const auto& side : sides) {
+    if (side.size() < 2) {
+      return false;
+    }
+  }
+  return sides[0].size() + sides[2].size() >= 6 || sides[1].size() + sides[3].size() >= 6;
+}
+
+}  // namespace
+
 std::optional<Fit> Locator::Impl::fit_quad_model(const Region& region, const Heights& h) {
   if (region.hull.size() < 3) {
     return std::nullopt;
@@ -676,9 +694,9 @@ std::optional<Fit> Locator::Impl::fit_quad_model(const Region& region, const Hei
         return std::nullopt;
       }
       outward[k] = *mid - *centre_plane;
-      if (pts_plane[k].size() < 3) {
-        return std::nullopt;
-      }
+    }
+    if (!enough_crossings(pts_plane)) {
+      return std::nullopt;
     }
     const double scale = mapper->scale_at(centre_px, h.top);  // plane units per px
     // Trimmed least squares: fit all, keep the crossings within 1 px, refit, keep those within
@@ -703,9 +721,9 @@ std::optional<Fit> Locator::Impl::fit_quad_model(const Region& region, const Hei
             ++n;
           }
         }
-        if (kept[k].size() < 3) {
-          return std::nullopt;
-        }
+      }
+      if (!enough_crossings(kept)) {
+        return std::nullopt;
       }
       limit = std::clamp(3.0 * std::sqrt(sum2 / std::max(1, n)), 0.2, 1.0);
     }

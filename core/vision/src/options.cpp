@@ -119,8 +119,11 @@ void read_locate_options(config::MapReader& map, LocateOptions& out) {
     }
     map.absorb(c);
   }
+  // Given, the grasp models replace `out`'s (a camera's own list replaces the global one).
   const auto grasps = map.sequence("grasps", false);
-  out.grasps.clear();
+  if (map.has("grasps")) {
+    out.grasps.clear();
+  }
   for (std::size_t i = 0; i < grasps.size(); ++i) {
     config::MapReader g = map.element(grasps[i], fmt::format("grasps[{}]", i));
     GraspModel model;
@@ -190,6 +193,34 @@ Result<LocateOptions> load_locate_options(const std::string& path) {
   config::MapReader locate = root.child("locate", false);
   read_locate_options(locate, out);
   CELL_TRY(locate.finish());
+  return out;
+}
+
+Result<LocateOptions> load_locate_options(const std::string& path, const std::string& camera_id) {
+  auto out = load_locate_options(path);
+  if (!out) {
+    return out;
+  }
+  auto doc = config::load_file(path);
+  if (!doc) {
+    return doc.error();
+  }
+  const YAML::Node cameras = doc->root["cameras"];
+  if (!cameras.IsSequence()) {
+    return out;
+  }
+  config::MapReader root(*doc, doc->root, "");
+  for (std::size_t i = 0; i < cameras.size(); ++i) {
+    const YAML::Node entry = cameras[i];
+    if (!entry.IsMap() || !entry["id"] || entry["id"].as<std::string>("") != camera_id ||
+        !entry["locate"]) {
+      continue;
+    }
+    config::MapReader e = root.element(entry, fmt::format("cameras[{}]", i));
+    config::MapReader locate = e.child("locate", false);
+    read_locate_options(locate, *out);
+    CELL_TRY(locate.finish());
+  }
   return out;
 }
 

@@ -68,6 +68,12 @@ Result<VisionConfig> load_config(const config::Document& doc) {
   if (c.max_pending_edges < 1 || c.max_pending_edges > 4096) {
     root.fail("max_pending_edges", fmt::format("must be in 1..4096, got {}", c.max_pending_edges));
   }
+  // The global locate section first: a camera's own `locate:` keys go over it.
+  if (root.has("locate")) {
+    config::MapReader locate = root.child("locate", false);
+    read_locate_options(locate, c.locate);
+    root.absorb(locate);
+  }
   std::set<std::string> ids;
   const auto cameras = root.sequence("cameras", false);
   for (std::size_t i = 0; i < cameras.size(); ++i) {
@@ -85,6 +91,12 @@ Result<VisionConfig> load_config(const config::Document& doc) {
     if (!std::isfinite(entry.working_plane_z_mm)) {
       e.fail("working_plane_z_mm", "must be finite");
     }
+    if (e.has("locate")) {
+      config::MapReader locate = e.child("locate", false);
+      entry.locate = c.locate;
+      read_locate_options(locate, *entry.locate);
+      e.absorb(locate);
+    }
     if (!entry.id.empty() && !ids.insert(entry.id).second) {
       e.fail("id", fmt::format("camera '{}' is listed twice", entry.id));
     }
@@ -92,11 +104,6 @@ Result<VisionConfig> load_config(const config::Document& doc) {
                                                   : service::resolve_path(entry.camera_file);
     root.absorb(e);
     c.cameras.push_back(std::move(entry));
-  }
-  if (root.has("locate")) {
-    config::MapReader locate = root.child("locate", false);
-    read_locate_options(locate, c.locate);
-    root.absorb(locate);
   }
   if (root.has("edges")) {
     config::MapReader edges = root.child("edges", false);

@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,10 @@ struct CameraEntry {
   std::string robot_id;
   Eigen::Isometry3d world_T_base = Eigen::Isometry3d::Identity();
   double working_plane_z_mm = 0.0;  ///< table or belt top in that robot's base frame
+  /// The `locate:` options for this camera's frames: the global section with the entry's own
+  /// `locate:` keys over it (a camera's resolution and contrast set e.g. max_fit_rms_px).
+  /// nullopt: the global section as it is.
+  std::optional<LocateOptions> locate;
   std::string where;                ///< file:line:col of the entry
 };
 

@@ -76,6 +76,11 @@ VisionService::VisionService(service::Context& ctx, const VisionConfig& config)
       calibration_reader_(ctx.participant(), calibration_topic_, bus::topics::kCameraCalibration),
       detections_writer_(ctx.participant(), detections_topic_, bus::topics::kDetections),
       edge_writer_(ctx.participant(), edge_result_topic_, bus::topics::kEdgeResult) {
+  for (const CameraEntry& entry : config_.cameras) {
+    if (entry.locate) {
+      camera_locators_.emplace(entry.id, make_locator(*entry.locate));
+    }
+  }
   // The configured cameras start with their nominal calibrations (logged one by one).
   for (const CameraEntry& entry : config_.cameras) {
     std::string why;
@@ -280,6 +285,11 @@ void VisionService::handle_image(const cell_vision_Image& image) {
   serve_pending(*cam, cam->history.back());
 }
 
+Locator& VisionService::locator_for(const std::string& camera_id) {
+  const auto it = camera_locators_.find(camera_id);
+  return it == camera_locators_.end() ? locator_ : it->second;
+}
+
 void VisionService::process(Camera& cam, const Frame& frame) {
   const auto started = steady_clock::now();
   ++images_;
@@ -307,10 +317,11 @@ void VisionService::process(Camera& cam, const Frame& frame) {
       }
     }
   }
-  auto located = locator_.locate(frame.image, mapper);
+  Locator& locator = locator_for(cam.id);
+  auto located = locator.locate(frame.image, mapper);
   const double ms =
       std::chrono::duration<double, std::milli>(steady_clock::now() - started).count();
-  const std::string pipeline(to_string(config_.locate.pipeline));
+  const std::string pipeline(to_string(locator.options().pipeline));
   std::string calibration = cam.mapper ? mapper.describe() + mapping_note
                                        : "none: pixels only (" + cam.mapper_problem + ")";
   if (cam.mapper && !cam.published) {
@@ -403,7 +414,7 @@ void VisionService::publish_error(const cell_vision_Image& image,
                {"seq", std::to_string(image.header.seq)}});
   }
   static const std::string kNone;
-  const std::string pipeline(to_string(config_.locate.pipeline));
+  const std::string pipeline(to_string(locator_for(camera_id).options().pipeline));
   const std::string robot_id(bus::str(image.robot_id));
   const std::string belt_id(bus::str(image.belt_id));
   cell_vision_Detections msg{};

@@ -98,7 +98,9 @@ class VisionService {
 
   service::Context& ctx_;
   VisionConfig config_;
-  Locator locator_;
+  Locator locator_;  ///< the global locate options
+  std::map<std::string, Locator> camera_locators_;  ///< cameras with their own locate keys
+  Locator& locator_for(const std::string& camera_id);
   std::map<std::string, Camera> cameras_;
   std::map<std::string, std::optional<kinematics::RobotModel>> robots_;
   std::map<std::string, std::string> robot_problems_;

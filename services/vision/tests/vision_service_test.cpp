@@ -63,6 +63,30 @@ TEST(VisionConfig, TheShippedConfigLoads) {
   EXPECT_EQ(c->camera("belt_cam")->robot_id, "scara_picker");
   EXPECT_NEAR(c->camera("belt_cam")->world_T_base.translation().x(), 1000.0, 1e-12);
   EXPECT_FALSE(c->locate.grasps.empty());
+  // The belt camera's own locate keys over the global section; the 7545's uses the section.
+  EXPECT_FALSE(c->camera("ibm7545_eye")->locate.has_value());
+  ASSERT_TRUE(c->camera("belt_cam")->locate.has_value());
+  EXPECT_DOUBLE_EQ(c->camera("belt_cam")->locate->max_fit_rms_px, 0.6);
+  EXPECT_DOUBLE_EQ(c->locate.max_fit_rms_px, 0.35);
+  EXPECT_EQ(c->camera("belt_cam")->locate->grasps.size(), c->locate.grasps.size());
+}
+
+TEST(VisionConfig, ACamerasLocateKeysGoOverTheGlobalOnesAndAreChecked) {
+  const auto c = config_from(
+      "service: {id: vision}\n"
+      "cameras:\n"
+      "  - {id: a, working_plane_z_mm: 0, locate: {max_fit_rms_px: 0.5}}\n"
+      "locate: {pipeline: thesis, max_fit_rms_px: 0.3}\n");
+  ASSERT_TRUE(c) << c.error().message;
+  ASSERT_TRUE(c->camera("a")->locate.has_value());
+  EXPECT_DOUBLE_EQ(c->camera("a")->locate->max_fit_rms_px, 0.5);
+  EXPECT_EQ(c->camera("a")->locate->pipeline, vision::Pipeline::kThesis);
+  const auto bad = config_from(
+      "service: {id: vision}\n"
+      "cameras:\n"
+      "  - {id: a, working_plane_z_mm: 0, locate: {max_fit_rms: 0.5}}\n");
+  ASSERT_FALSE(bad);
+  EXPECT_THAT(bad.error().message, HasSubstr("vision.yaml:3:45: unknown key 'cameras[0].locate.max_fit_rms'"));
 }
 
 TEST(VisionConfig, ErrorsNameTheFileLineAndKey) {

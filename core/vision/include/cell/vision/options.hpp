@@ -58,4 +58,9 @@ void read_edge_options(config::MapReader& map, EdgeFinderOptions& out);
 /// Errors: kConfig with file:line:col.
 Result<LocateOptions> load_locate_options(const std::string& path);
 
+/// The options one camera's frames are located with: the file's `locate:` section with the
+/// `locate:` keys of its `cameras:` entry whose id is `camera_id` over it (config/vision.yaml;
+/// no such entry: the section as it is).
+Result<LocateOptions> load_locate_options(const std::string& path, const std::string& camera_id);
+
 }  // namespace cell::vision
