@@ -109,11 +109,12 @@ TEST_F(TaskCellTest, ConveyorStreamAtHalfAMetrePerSecondIsPickedAndTheMissesAddU
   // Of the parts the vision service recognised: on an idle machine every one is picked (17 of
   // 17 in three runs: the 99%); the bound here, at most 3 of about 17 missed, leaves room
   // for a loaded 2-core machine, where the arm's tracking lags (12 of 17 with a build running
-  // beside it). The vision service leaves some DIPs on the dark belt 'unknown' (reported as
-  // touching: a defect of core/vision on the belt camera, counted as locate_failed); with
-  // those, the picked fraction is lower.
+  // beside it). Vision names every DIP on the dark belt (core/vision/tests/belt_test.cpp: 60 of
+  // 60; 19 of 19 picked here on an idle machine); until the belt camera's own locate keys one in
+  // eight was left 'unknown' (counted as locate_failed).
   EXPECT_LE(recognised_misses + (picked - in_bin), 3);
-  EXPECT_GE(static_cast<double>(in_bin) / std::max(1, in_bin + fell_off), 0.6);
+  EXPECT_LE(counters.value("locate_failed", 0), 2) << counters.dump();
+  EXPECT_GE(static_cast<double>(in_bin) / std::max(1, in_bin + fell_off), 0.75);
 }
 
 TEST_F(TaskCellTest, KilledTwentyTimesTheTableJobStillPlacesEveryPartOnce) {
