@@ -4,7 +4,7 @@
 //  - Table: 15 ICs scattered by the simulator in the camera window, the 7545's camera
 //    calibrated from scratch by cell-calibration (board images, then the guided hand-eye), the
 //    thesis's job submitted: every IC in its slot within 0.5 mm and 1 degree.
-//  - Conveyor: a stream of DIPs on belt1 at 0.5 m/s for 60 s.
+//  - Conveyor: a stream of DIPs on belt1 at 0.5 m/s for 60 s (2 m/s: bench/task, not met yet).
 //  - Faults: cell-task killed (SIGKILL) 20 times during a table job; bad requests refused.
 #include <csignal>
 #include <random>
@@ -43,78 +43,113 @@ TEST_F(TaskCellTest, TableJobFromScratchPutsEveryScatteredIcInItsSlot) {
   expect_all_in_slots(15);
 }
 
-TEST_F(TaskCellTest, ConveyorStreamAtHalfAMetrePerSecondIsPickedAndTheMissesAddUp) {
+/// What a conveyor run left, by ground truth and by the job's counters.
+struct BeltOutcome {
+  int in_bin = 0;    ///< beside the belt at the job's slot, picker (100, -300)
+  int fell_off = 0;  ///< fallen off the belt's end: missed
+  int on_belt = 0;   ///< not yet past the window at the end
+  int picked = 0;    ///< the job's count
+  int causes = 0;    ///< the job's misses, every cause
+  int locate_failed = 0;
+  json counters;
+};
+
+class ConveyorCellTest : public TaskCellTest {
+ protected:
+  /// A stream of DIPs, a part every 3 s for the job's 60 s, at `speed_mm_s`, picked by
+  /// `job_file`; checks that the job succeeded and that its counts add up against the truth.
+  BeltOutcome run_stream(double speed_mm_s, const std::string& job_file, const std::string& id) {
+    BeltOutcome out;
+    const std::string scene = write(id + ".yaml", belt_scene(speed_mm_s, 3.0));
+    start_cell(scene);
+    if (HasFailure()) {
+      return out;
+    }
+    // Not the subject here: the belt camera calibrated as the simulator knows it.
+    (void)child("calibration")->stop(10s);
+    store_truth_calibration("belt_cam", "scara_picker",
+                            Eigen::Isometry3d(Eigen::Translation3d(kPickerBaseX, 0, kPickerBaseZ)),
+                            -200.0);
+    if (HasFailure()) {
+      return out;
+    }
+    start("calibration2", "cell-calibration", dir_ + "/calibration.yaml");
+    EXPECT_TRUE(eventually(
+        [&] {
+          const ToolRun show =
+              cellctl({"--json", "calibration", "show", "--camera", "belt_cam"});
+          return show.exit.code == 0 && show.output.find("simulator's truth") != std::string::npos;
+        },
+        30s));
+    EXPECT_EQ(cellctl({"robot", "home", "--robot", "scara_picker"}).exit.code, 0);
+    EXPECT_EQ(cellctl({"world", "reset", "--scene", scene}).exit.code, 0);
+    ToolRun r = cellctl(
+        {"submit", cell::testing::source_dir() + "/config/jobs/" + job_file, "--id", id, "--wait"},
+        300s);
+    EXPECT_EQ(r.exit.code, 0) << r.output;
+    EXPECT_EQ(cellctl({"world", "belt", "--id", "belt1", "--speed", "0"}).exit.code, 0);
+    const json status = job(id);
+    EXPECT_EQ(status["state"], "succeeded") << status.dump(2);
+    for (const json& p : world_parts()) {
+      const double x = p["pose"]["x_mm"].get<double>() - kPickerBaseX;
+      const double y = p["pose"]["y_mm"].get<double>();
+      if (p["support"] == "floor" && std::hypot(x - 100.0, y + 300.0) < 60.0) {
+        ++out.in_bin;
+      } else if (p["support"] == "floor") {
+        ++out.fell_off;
+      } else {
+        ++out.on_belt;
+      }
+    }
+    out.counters = status.value("counters", json::object());
+    out.picked = out.counters.value("picked", 0);
+    for (auto it = out.counters.begin(); it != out.counters.end(); ++it) {
+      if (it.key() != "picked") {
+        out.causes += it.value().get<int>();
+      }
+    }
+    out.locate_failed = out.counters.value("locate_failed", 0);
+    std::printf("belt at %.1f m/s for 60 s: %d in the bin, %d fell off the end, %d on the belt; "
+                "job: picked %d, %s\n",
+                speed_mm_s / 1000.0, out.in_bin, out.fell_off, out.on_belt, out.picked,
+                out.counters.dump().c_str());
+    // Why parts were missed, in the job's words (the first of each kind).
+    std::set<std::string> seen;
+    for (const json& part : status.value("parts", json::array())) {
+      const std::string outcome = part.value("outcome", "");
+      if (outcome != "placed" && seen.insert(outcome).second) {
+        std::printf("  %s: %s\n", outcome.c_str(), part.value("detail", "").c_str());
+      }
+    }
+    // Every pick the job counts is a part in the bin, give or take a grasp the gripper closed
+    // on nothing (the simulated gripper has no part sensor).
+    EXPECT_GE(out.in_bin, out.picked - 3);
+    EXPECT_LE(out.in_bin, out.picked);
+    // The misses add up: every part that left the belt's end is a counted cause (or one of the
+    // grasps above).
+    EXPECT_GE(out.causes + (out.picked - out.in_bin), out.fell_off - 3);
+    EXPECT_LE(out.causes, out.fell_off + out.on_belt);
+    EXPECT_GE(out.picked + out.causes, 17);  // 60 s, a part every 3 s
+    // Vision names every DIP on the dark belt (core/vision/tests/belt_test.cpp: 60 of 60);
+    // until the belt camera had its own locate keys one in eight was left 'unknown'.
+    EXPECT_LE(out.locate_failed, 2) << out.counters.dump();
+    return out;
+  }
+
+  double picked_fraction(const BeltOutcome& o) const {
+    return static_cast<double>(o.in_bin) / std::max(1, o.in_bin + o.fell_off);
+  }
+};
+
+TEST_F(ConveyorCellTest, StreamAtHalfAMetrePerSecondIsPickedAndTheMissesAddUp) {
   // A part every 3 s: the picker's cycle is about 1.9 s (track, grip, depart, place, back to
   // its ready pose); bench/task measures it at a part every 2 and 1.2 s as well.
-  const std::string scene = write("belt.yaml", belt_scene(500.0, 3.0));
-  start_cell(scene);
-  ASSERT_FALSE(HasFailure());
-  // Not the subject here: the belt camera calibrated as the simulator knows it.
-  (void)child("calibration")->stop(10s);
-  store_truth_calibration("belt_cam", "scara_picker",
-                          Eigen::Isometry3d(Eigen::Translation3d(kPickerBaseX, 0, kPickerBaseZ)),
-                          -200.0);
-  ASSERT_FALSE(HasFailure());
-  start("calibration2", "cell-calibration", dir_ + "/calibration.yaml");
-  ASSERT_TRUE(eventually(
-      [&] {
-        const ToolRun show = cellctl({"--json", "calibration", "show", "--camera", "belt_cam"});
-        return show.exit.code == 0 && show.output.find("simulator's truth") != std::string::npos;
-      },
-      30s));
-  ASSERT_EQ(cellctl({"robot", "home", "--robot", "scara_picker"}).exit.code, 0);
-  ASSERT_EQ(cellctl({"world", "reset", "--scene", scene}).exit.code, 0);
-  ToolRun r = cellctl({"submit", cell::testing::source_dir() + "/config/jobs/conveyor_ics.yaml",
-                       "--id", "belt-1", "--wait"},
-                      300s);
-  EXPECT_EQ(r.exit.code, 0) << r.output;
-  ASSERT_EQ(cellctl({"world", "belt", "--id", "belt1", "--speed", "0"}).exit.code, 0);
-  const json status = job("belt-1");
-  ASSERT_EQ(status["state"], "succeeded") << status.dump(2);
-  // By ground truth: in the bin (beside the belt at the job's slot, picker (100, -300)), fallen
-  // off the belt's end (missed), still on the belt (not yet past the window at the end).
-  int in_bin = 0, fell_off = 0, on_belt = 0;
-  for (const json& p : world_parts()) {
-    const double x = p["pose"]["x_mm"].get<double>() - kPickerBaseX;
-    const double y = p["pose"]["y_mm"].get<double>();
-    if (p["support"] == "floor" && std::hypot(x - 100.0, y + 300.0) < 60.0) {
-      ++in_bin;
-    } else if (p["support"] == "floor") {
-      ++fell_off;
-    } else {
-      ++on_belt;
-    }
-  }
-  const json counters = status["counters"];
-  const int picked = counters.value("picked", 0);
-  int causes = 0;
-  for (auto it = counters.begin(); it != counters.end(); ++it) {
-    if (it.key() != "picked") {
-      causes += it.value().get<int>();
-    }
-  }
-  const int recognised_misses = causes - counters.value("locate_failed", 0);
-  std::printf("belt at 0.5 m/s for 60 s: %d in the bin, %d fell off the end, %d on the belt; "
-              "job: picked %d, %s\n",
-              in_bin, fell_off, on_belt, picked, counters.dump().c_str());
-  // Every pick the job counts is a part in the bin, give or take a grasp the gripper closed on
-  // nothing (the simulated gripper has no part sensor).
-  EXPECT_GE(in_bin, picked - 3);
-  EXPECT_LE(in_bin, picked);
-  // The misses add up: every part that left the belt's end is a counted cause (or one of the
-  // grasps above).
-  EXPECT_GE(causes + (picked - in_bin), fell_off - 3);
-  EXPECT_LE(causes, fell_off + on_belt);
-  EXPECT_GE(picked + causes, 17);  // 60 s, a part every 3 s
-  // Of the parts the vision service recognised: on an idle machine every one is picked (17 of
-  // 17 in three runs: the 99%); the bound here, at most 3 of about 17 missed, leaves room
-  // for a loaded 2-core machine, where the arm's tracking lags (12 of 17 with a build running
-  // beside it). Vision names every DIP on the dark belt (core/vision/tests/belt_test.cpp: 60 of
-  // 60; 19 of 19 picked here on an idle machine); until the belt camera's own locate keys one in
-  // eight was left 'unknown' (counted as locate_failed).
-  EXPECT_LE(recognised_misses + (picked - in_bin), 3);
-  EXPECT_LE(counters.value("locate_failed", 0), 2) << counters.dump();
-  EXPECT_GE(static_cast<double>(in_bin) / std::max(1, in_bin + fell_off), 0.75);
+  const BeltOutcome o = run_stream(500.0, "conveyor_ics.yaml", "belt-05");
+  // Of the parts the vision service recognised: on an idle machine every one is picked (19 of
+  // 19, the 99%); the bound here, at most 3 of about 19 missed, leaves room for a
+  // loaded 2-core machine, where the arm's tracking lags (12 of 17 with a build beside it).
+  EXPECT_LE(o.causes - o.locate_failed + (o.picked - o.in_bin), 3);
+  EXPECT_GE(picked_fraction(o), 0.75);
 }
 
 TEST_F(TaskCellTest, KilledTwentyTimesTheTableJobStillPlacesEveryPartOnce) {
