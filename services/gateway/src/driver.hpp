@@ -95,6 +95,14 @@ class RobotDriver {
   /// before it is queued).
   virtual bool supports(DriverCommand /*command*/) const noexcept { return true; }
 
+  /// The controller's own limits on a command's arguments (e.g. the Excalibur's tolerance
+  /// range), checked when the command is posted, before it is acknowledged: a command the
+  /// controller would refuse is refused to its sender. Errors: kInvalidArgument with why.
+  /// Thread-safe (reads configuration only).
+  virtual Status check(DriverCommand /*command*/, const CommandArgs& /*args*/) const {
+    return ok_status();
+  }
+
   /// Meaning of fault bits, e.g. "J1 positive overrun; torques late (0x1000)".
   virtual std::string describe_faults(std::uint32_t bits) const = 0;
 

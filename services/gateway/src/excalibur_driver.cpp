@@ -245,6 +245,20 @@ CycleStatus ExcaliburDriver::write(Clock::time_point /*now*/, const JointSetpoin
   return faults != 0 ? CycleStatus::kFault : CycleStatus::kOk;
 }
 
+Status ExcaliburDriver::check(DriverCommand command, const CommandArgs& args) const {
+  if (command == DriverCommand::kSetTolerance) {
+    const double tolerance_deg = args.tolerance_rad * kDegPerRad;
+    const auto& d = dialect_->defaults();
+    if (!(tolerance_deg >= d.min_tolerance_deg && tolerance_deg <= d.max_tolerance_deg)) {
+      return Error{Errc::kInvalidArgument,
+                   fmt::format("tolerance {:.4g} deg is outside the controller's range [{}, {}] "
+                               "deg",
+                               tolerance_deg, d.min_tolerance_deg, d.max_tolerance_deg)};
+    }
+  }
+  return ok_status();
+}
+
 Status ExcaliburDriver::command(DriverCommand command, const CommandArgs& args) {
   Queued q;
   q.command = command;
@@ -285,17 +299,10 @@ Status ExcaliburDriver::command(DriverCommand command, const CommandArgs& args) 
                                    static_cast<int>(args.mode))};
       }
       break;
-    case DriverCommand::kSetTolerance: {
+    case DriverCommand::kSetTolerance:
+      CELL_TRY(check(command, args));
       q.tolerance_deg = args.tolerance_rad * kDegPerRad;
-      const auto& d = dialect_->defaults();
-      if (!(q.tolerance_deg >= d.min_tolerance_deg && q.tolerance_deg <= d.max_tolerance_deg)) {
-        return Error{Errc::kInvalidArgument,
-                     fmt::format("tolerance {:.4g} deg is outside the controller's range [{}, {}] "
-                                 "deg",
-                                 q.tolerance_deg, d.min_tolerance_deg, d.max_tolerance_deg)};
-      }
       break;
-    }
     case DriverCommand::kReset:
       break;
   }

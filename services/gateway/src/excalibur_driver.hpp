@@ -126,6 +126,7 @@ class ExcaliburDriver final : public RobotDriver {
   /// Errors: kInvalidArgument (no lights, no gains, a mode the controller does not have, a
   /// tolerance outside its range), kNotReady (queue full, gripper absent from the dialect).
   Status command(DriverCommand command, const CommandArgs& args) override;
+  Status check(DriverCommand command, const CommandArgs& args) const override;
   bool supports(DriverCommand command) const noexcept override;
   std::string describe_faults(std::uint32_t bits) const override;
   const DriverInfo& info() const noexcept override { return info_; }

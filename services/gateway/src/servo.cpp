@@ -161,6 +161,9 @@ Status Servo::post_command(cell_robot_RobotCommandKind kind, const CommandArgs& 
       break;
     case cell_robot_CMD_SET_TOLERANCE:
       CELL_TRY(unsupported(DriverCommand::kSetTolerance));
+      if (args.tolerance_rad > 0 && std::isfinite(args.tolerance_rad)) {
+        CELL_TRY(driver_->check(DriverCommand::kSetTolerance, args));
+      }
       break;
     default:
       break;

@@ -318,6 +318,11 @@ TEST_F(ExcaliburDriverTest, ModesToleranceAndGripper) {
   args.tolerance_rad = 50 * kDeg;
   EXPECT_THAT(driver_->command(DriverCommand::kSetTolerance, args),
               IsErrWith(Errc::kInvalidArgument, "outside the controller's range"));
+  // The same verdict before anything is sent (the servo asks it when the command is posted).
+  EXPECT_THAT(driver_->check(DriverCommand::kSetTolerance, args),
+              IsErrWith(Errc::kInvalidArgument, "50 deg is outside the controller's range"));
+  args.tolerance_rad = 0.5 * kDeg;
+  EXPECT_THAT(driver_->check(DriverCommand::kSetTolerance, args), IsOk());
   // Manual: the master arm drives the slave; the driver reports busy and follows the arm.
   args.mode = cell_robot_MODE_MANUAL;
   ASSERT_THAT(driver_->command(DriverCommand::kSetMode, args), IsOk());

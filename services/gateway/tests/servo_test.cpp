@@ -67,6 +67,12 @@ class FakeDriver final : public RobotDriver {
     }
     return ok_status();
   }
+  Status check(DriverCommand c, const CommandArgs& args) const override {
+    if (c == DriverCommand::kSetTolerance && args.tolerance_rad > 0.1) {
+      return Error{Errc::kInvalidArgument, "tolerance outside the fake's range"};
+    }
+    return ok_status();
+  }
   std::string describe_faults(std::uint32_t bits) const override {
     return bits & 0x1000 ? "PS/2 did not provide torques in time (0x1000)" : "other";
   }
@@ -106,6 +112,23 @@ class ServoTest : public ::testing::Test {
   motion::Planner planner_;
   Clock::time_point now_ = Clock::now();
 };
+
+// A command the controller would refuse is refused when posted, never acknowledged and queued.
+TEST_F(ServoTest, ACommandOutsideTheControllersLimitsIsRefusedWhenPosted) {
+  auto driver = std::make_unique<FakeDriver>(jv({deg(45), deg(105), 0, 0}));
+  FakeDriver* fake = driver.get();
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  CommandArgs args;
+  args.tolerance_rad = 0.5;
+  EXPECT_THAT(servo.post_command(cell_robot_CMD_SET_TOLERANCE, args),
+              IsErrWith(Errc::kInvalidArgument, "outside the fake's range"));
+  args.tolerance_rad = 0.01;
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_SET_TOLERANCE, args), IsOk());
+  run_until(servo, [&](const ServoSnapshot&) { return !fake->commands.empty(); }, 0.1);
+  ASSERT_EQ(fake->commands.size(), 1U);
+  EXPECT_EQ(fake->commands[0], DriverCommand::kSetTolerance);
+}
 
 TEST_F(ServoTest, IdealRobotRefusesUntilHomedThenFollowsExactly) {
   const JointVector q0 = jv({deg(45), deg(105), 0, 0});
