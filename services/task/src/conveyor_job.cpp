@@ -23,6 +23,7 @@
 #include "cell/common/log.hpp"
 #include "cell/common/time.hpp"
 #include "cell/geometry/idl_pose.hpp"
+#include "cell/trajectory/alter.hpp"
 #include "job_run.hpp"
 
 namespace cell::task_service {
@@ -488,11 +489,18 @@ class ConveyorJob {
           const bool met = c.dot(belt.direction) > 0.0;
           part_met = part_met || met;
           // The rate only while following: held at the limit (or waiting), the gateway must
-          // not extrapolate the correction further.
+          // not extrapolate the correction further. Near the limit, the rate is cut so that
+          // the gateway's extrapolation (up to its horizon past the stamp, whatever the link
+          // delays) ends at the limit, never past it (netlab, 50 ms + 5 % loss: a chased part
+          // drove the arm 32 mm past the limit and out of reach).
+          Eigen::Vector3d rate = Eigen::Vector3d::Zero();
+          if (met && !escaped) {
+            const double room = spec_.downstream_mm - (s_meet + c.dot(belt.direction));
+            const double reach_mm = speed * trajectory::AlterState::kExtrapolationHorizonS;
+            rate = reach_mm > room ? v_belt * std::max(0.0, room / reach_mm) : v_belt;
+          }
           (void)run_.links().alter(robot_id, trajectory_id, ++cycle,
-                                   met ? c : Eigen::Vector3d::Zero(),
-                                   met && !escaped ? v_belt : Eigen::Vector3d::Zero(),
-                                   latest->stamp_ns);
+                                   met ? c : Eigen::Vector3d::Zero(), rate, latest->stamp_ns);
         }
       }
       pump_eye();
