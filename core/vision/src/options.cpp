@@ -179,49 +179,53 @@ void read_edge_options(config::MapReader& map, EdgeFinderOptions& out) {
   }
 }
 
-Result<LocateOptions> load_locate_options(const std::string& path) {
-  auto doc = config::load_file(path);
-  if (!doc) {
-    return doc.error();
-  }
-  LocateOptions out;
-  const YAML::Node section = doc->root["locate"];
-  if (!section.IsDefined() || section.IsNull()) {
-    return out;
-  }
-  config::MapReader root(*doc, doc->root, "");
-  config::MapReader locate = root.child("locate", false);
-  read_locate_options(locate, out);
-  CELL_TRY(locate.finish());
-  return out;
-}
+namespace {
 
-Result<LocateOptions> load_locate_options(const std::string& path, const std::string& camera_id) {
-  auto out = load_locate_options(path);
-  if (!out) {
+/// The `locate:` section of a parsed vision config, with the `locate:` keys of the `cameras:`
+/// entry whose id is `camera_id` over it (nullptr: the section alone).
+Result<LocateOptions> locate_options_of(const config::Document& doc, const std::string* camera_id) {
+  LocateOptions out;
+  config::MapReader root(doc, doc.root, "");
+  const YAML::Node section = doc.root["locate"];
+  if (section.IsDefined() && !section.IsNull()) {
+    config::MapReader locate = root.child("locate", false);
+    read_locate_options(locate, out);
+    CELL_TRY(locate.finish());
+  }
+  const YAML::Node cameras = doc.root["cameras"];
+  if (camera_id == nullptr || !cameras.IsSequence()) {
     return out;
   }
-  auto doc = config::load_file(path);
-  if (!doc) {
-    return doc.error();
-  }
-  const YAML::Node cameras = doc->root["cameras"];
-  if (!cameras.IsSequence()) {
-    return out;
-  }
-  config::MapReader root(*doc, doc->root, "");
   for (std::size_t i = 0; i < cameras.size(); ++i) {
     const YAML::Node entry = cameras[i];
-    if (!entry.IsMap() || !entry["id"] || entry["id"].as<std::string>("") != camera_id ||
+    if (!entry.IsMap() || !entry["id"] || entry["id"].as<std::string>("") != *camera_id ||
         !entry["locate"]) {
       continue;
     }
     config::MapReader e = root.element(entry, fmt::format("cameras[{}]", i));
     config::MapReader locate = e.child("locate", false);
-    read_locate_options(locate, *out);
+    read_locate_options(locate, out);
     CELL_TRY(locate.finish());
   }
   return out;
+}
+
+}  // namespace
+
+Result<LocateOptions> load_locate_options(const std::string& path) {
+  auto doc = config::load_file(path);
+  if (!doc) {
+    return doc.error();
+  }
+  return locate_options_of(*doc, nullptr);
+}
+
+Result<LocateOptions> load_locate_options(const std::string& path, const std::string& camera_id) {
+  auto doc = config::load_file(path);
+  if (!doc) {
+    return doc.error();
+  }
+  return locate_options_of(*doc, &camera_id);
 }
 
 }  // namespace cell::vision
