@@ -16,8 +16,8 @@ set -euo pipefail
 readonly kScript="make-pki.sh"
 readonly kHere="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 readonly kDefaultIdentities=(sim-7545 gateway.ibm7545 gateway.picker sim-excalibur
-  gateway.excalibur motion sim-world camera.ibm7545_eye camera.belt_cam vision calibration task
-  echo monitor operator viewer)
+  gateway.excalibur motion sim-world camera.ibm7545_eye camera.belt_cam camera.assembly_cam vision
+  calibration task echo monitor operator viewer)
 readonly kDomainMin=0
 readonly kDomainMax=230
 

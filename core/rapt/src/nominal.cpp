@@ -210,47 +210,9 @@ class Engine {
   }
 
   Relation from_decl(const RelationDecl& decl, int s) {
-    const Feature& fa = p_.feature(decl.a);
-    const Feature& fb = p_.feature(decl.b);
-    Relation r;
+    Relation r = relation_of(p_, decl);
     r.a = node(decl.a.body, s);
     r.b = node(decl.b.body, s);
-    r.a_T_fa = fa.body_T_feature;
-    r.b_T_fb = fb.body_T_feature;
-    r.sources = {decl.loc};
-    switch (decl.kind) {
-      case RelKeyword::kAgainst:
-        if (fa.type == FeatureType::kFace && fb.type == FeatureType::kFace) {
-          r.type = RelType::kAgpp;
-        } else if (fa.type == FeatureType::kFace || fb.type == FeatureType::kFace) {
-          const Feature& other = fa.type == FeatureType::kFace ? fb : fa;
-          r.type = other.cylindrical() ? RelType::kAgpc : RelType::kAgps;
-          r.offset = other.radius;
-          r.plane_on_b = fa.type != FeatureType::kFace;
-        } else {
-          r.type = RelType::kAgss;
-          r.offset = fa.radius + fb.radius;
-        }
-        break;
-      case RelKeyword::kCoplanar:  // AGPP with one normal flipped (digest §1.5)
-        r.type = RelType::kAgpp;
-        r.b_T_fb = r.b_T_fb * flip_x();
-        break;
-      case RelKeyword::kFits:
-        r.type = RelType::kFits;
-        break;
-      case RelKeyword::kAligned:  // FITS after flipping a direction
-        r.type = RelType::kFits;
-        r.b_T_fb = r.b_T_fb * flip_x();
-        break;
-      case RelKeyword::kParax:
-        r.type = RelType::kParax;
-        break;
-      case RelKeyword::kParallel:  // PARAX after flipping a direction
-        r.type = RelType::kParax;
-        r.b_T_fb = r.b_T_fb * flip_x();
-        break;
-    }
     note_source(decl.loc, fmt::format("{}/{}, {} in situation {}", to_string(decl.kind),
                                       p_.feature_name(decl.a), p_.feature_name(decl.b), s));
     return r;
@@ -640,6 +602,58 @@ class Engine {
 };
 
 }  // namespace
+
+Relation relation_of(const Program& program, const RelationDecl& decl) {
+  const Feature& fa = program.feature(decl.a);
+  const Feature& fb = program.feature(decl.b);
+  Relation r;
+  r.a = decl.a.body;
+  r.b = decl.b.body;
+  r.a_T_fa = fa.body_T_feature;
+  r.b_T_fb = fb.body_T_feature;
+  r.sources = {decl.loc};
+  switch (decl.kind) {
+    case RelKeyword::kAgainst:
+      if (fa.type == FeatureType::kFace && fb.type == FeatureType::kFace) {
+        r.type = RelType::kAgpp;
+      } else if (fa.type == FeatureType::kFace || fb.type == FeatureType::kFace) {
+        const Feature& other = fa.type == FeatureType::kFace ? fb : fa;
+        r.type = other.cylindrical() ? RelType::kAgpc : RelType::kAgps;
+        r.offset = other.radius;
+        r.plane_on_b = fa.type != FeatureType::kFace;
+      } else {
+        r.type = RelType::kAgss;
+        r.offset = fa.radius + fb.radius;
+      }
+      break;
+    case RelKeyword::kCoplanar:  // AGPP with one normal flipped (digest §1.5)
+      r.type = RelType::kAgpp;
+      r.b_T_fb = r.b_T_fb * flip_x();
+      break;
+    case RelKeyword::kFits:
+      r.type = RelType::kFits;
+      break;
+    case RelKeyword::kAligned:  // FITS after flipping a direction
+      r.type = RelType::kFits;
+      r.b_T_fb = r.b_T_fb * flip_x();
+      break;
+    case RelKeyword::kParax:
+      r.type = RelType::kParax;
+      break;
+    case RelKeyword::kParallel:  // PARAX after flipping a direction
+      r.type = RelType::kParax;
+      r.b_T_fb = r.b_T_fb * flip_x();
+      break;
+  }
+  return r;
+}
+
+std::pair<double, double> relation_residual(const Program& program,
+                                            const RelationDecl& decl,
+                                            const Pose& world_T_a,
+                                            const Pose& world_T_b) {
+  return residual(relation_of(program, decl), Pose(world_T_a.inverse() * world_T_b));
+}
 
 NominalSolution infer_nominal(const Program& program,
                               Diagnostics& diags,

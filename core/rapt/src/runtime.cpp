@@ -120,6 +120,9 @@ Result<RunResult> run(const CompiledProgram& cp,
                       const std::vector<Reading>& readings,
                       const RunOptions& options) {
   const Program& program = cp.program;
+  const int last = options.through_situation > 0
+                       ? std::min(options.through_situation, program.situation_count())
+                       : program.situation_count();
   // Match every reading to a LOOK.
   std::vector<std::vector<std::optional<std::pair<ImagePoint, ImagePoint>>>> measured(
       cp.packages.size());
@@ -164,7 +167,7 @@ Result<RunResult> run(const CompiledProgram& cp,
   }
   for (std::size_t i = 0; i < cp.packages.size(); ++i) {
     const CompiledPackage& pkg = cp.packages[i];
-    if (!pkg.fixable) {
+    if (!pkg.fixable || pkg.situation > last) {
       continue;
     }
     for (std::size_t k = 0; k < pkg.looks.size(); ++k) {
@@ -190,7 +193,7 @@ Result<RunResult> run(const CompiledProgram& cp,
   out.situations = program.situation_count();
   out.packages.resize(cp.packages.size());
   Resolver resolver(cp, out.packages);
-  for (int s = 1; s <= out.situations; ++s) {
+  for (int s = 1; s <= last; ++s) {
     for (std::size_t i = 0; i < cp.packages.size(); ++i) {
       const CompiledPackage& pkg = cp.packages[i];
       if (pkg.situation != s) {
@@ -271,12 +274,12 @@ Result<RunResult> run(const CompiledProgram& cp,
   for (int b = 1; b <= out.bodies; ++b) {
     for (int s = 1; s <= out.situations; ++s) {
       const auto i = static_cast<std::size_t>((b - 1) * out.situations + (s - 1));
-      out.fm[i] = *resolver.fm(b, s);
+      out.fm[i] = s <= last ? *resolver.fm(b, s) : Pose::Identity();
       out.actual[i] = cp.nominal_pose(b, s) * out.fm[i];
     }
   }
   // Actions (thesis §7.5), in world axes: world_T_after = motion * world_T_before.
-  for (int s = 2; s <= out.situations; ++s) {
+  for (int s = 2; s <= last; ++s) {
     for (const int b : program.moved[static_cast<std::size_t>(s - 1)]) {
       const Pose& pn0 = cp.nominal_pose(b, s - 1);
       const Pose& pn1 = cp.nominal_pose(b, s);

@@ -6,31 +6,14 @@
 
 #include <fmt/format.h>
 
+#include "cell/config/pose.hpp"
 #include "cell/geometry/pose.hpp"
 
 namespace cell::render {
 namespace {
 
-constexpr double kDegToRad = std::numbers::pi / 180.0;
 
-/// {xyz_mm: [x, y, z], rpy_deg: [roll, pitch, yaw]} (URDF roll-pitch-yaw, as the robot files).
-Eigen::Isometry3d read_pose(config::MapReader& parent, const std::string& key) {
-  config::MapReader r = parent.child(key, true);
-  std::array<double, 3> xyz{};
-  std::array<double, 3> rpy{};
-  r.required("xyz_mm", xyz);
-  r.required("rpy_deg", rpy);
-  for (std::size_t i = 0; i < 3; ++i) {
-    if (!std::isfinite(xyz[i]) || !std::isfinite(rpy[i])) {
-      r.fail("", "values must be finite");
-      break;
-    }
-  }
-  parent.absorb(r);
-  return geometry::make_pose(
-      Eigen::Vector3d(xyz[0], xyz[1], xyz[2]),
-      geometry::Rpy{rpy[0] * kDegToRad, rpy[1] * kDegToRad, rpy[2] * kDegToRad});
-}
+using config::read_pose;
 
 Eigen::Vector3d read_vec3(config::MapReader& r, const std::string& key,
                           const Eigen::Vector3d& fallback) {

@@ -7,6 +7,7 @@
 
 #include <fmt/format.h>
 
+#include "cell/config/pose.hpp"
 #include "cell/config/yaml.hpp"
 
 namespace cell::task {
@@ -241,10 +242,31 @@ AssemblySpec read_assembly(config::MapReader& r) {
   r.optional("method", method);
   if (method == "actual") {
     s.method = AssemblySpec::Method::kActual;
-  } else if (method == "two_step") {
-    s.method = AssemblySpec::Method::kTwoStep;
+  } else if (method == "two_step_world") {
+    s.method = AssemblySpec::Method::kTwoStepWorld;
+  } else if (method == "two_step_destination") {
+    s.method = AssemblySpec::Method::kTwoStepDestination;
   } else {
-    r.fail("method", fmt::format("must be actual or two_step, got '{}'", method));
+    r.fail("method", fmt::format("must be actual, two_step_world or two_step_destination, got "
+                                 "'{}'",
+                                 method));
+  }
+  r.optional("agent", s.agent);
+  s.base_T_world = config::read_pose(r, "base_T_world");
+  s.agent_T_tool = config::read_pose(r, "agent_T_tool");
+  r.optional("verify", s.verify);
+  r.optional("max_retries", s.max_retries);
+  if (s.max_retries < 0 || s.max_retries > 10) {
+    r.fail("max_retries", fmt::format("must be in 0..10, got {}", s.max_retries));
+  }
+  if (r.has("camera_tolerance")) {
+    config::MapReader t = r.child("camera_tolerance", true);
+    t.optional("mm", s.camera_tolerance_mm);
+    t.optional("deg", s.camera_tolerance_deg);
+    if (!(s.camera_tolerance_mm > 0) || !(s.camera_tolerance_deg > 0)) {
+      t.fail("", "mm and deg must be positive");
+    }
+    r.absorb(t);
   }
   speed(r, s.speed_scale);
   return s;

@@ -1,5 +1,6 @@
 #include "job_run.hpp"
 
+#include <random>
 #include <thread>
 
 #include <fmt/format.h>
@@ -8,6 +9,29 @@
 #include "cell/common/log.hpp"
 
 namespace cell::task_service {
+
+std::vector<std::string> split_lines(const std::string& text) {
+  std::vector<std::string> out;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t end = text.find('\n', start);
+    std::string line = text.substr(start, end == std::string::npos ? std::string::npos
+                                                                   : end - start);
+    if (!line.empty()) {
+      out.push_back(std::move(line));
+    }
+    if (end == std::string::npos) {
+      break;
+    }
+    start = end + 1;
+  }
+  return out;
+}
+
+std::string fresh_tag(const char* what, int seq) {
+  static thread_local std::mt19937_64 rng{std::random_device{}()};
+  return fmt::format("{}{}-{:06x}", what, seq, rng() & 0xFFFFFF);
+}
 namespace {
 
 using namespace std::chrono_literals;

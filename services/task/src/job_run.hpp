@@ -157,11 +157,25 @@ class JobRun {
   std::string pause_reason_;
 };
 
+/// The non-empty lines of `text`.
+std::vector<std::string> split_lines(const std::string& text);
+
+/// A motion tag unique across restarts: "<what><seq>-<24 random bits>" (a restarted job's
+/// motions never reuse the id of one its predecessor sent).
+std::string fresh_tag(const char* what, int seq);
+
 /// Cancel and stop as the executor's result; nullopt for none.
 std::optional<ExecResult> interrupted_result(Interrupt i);
 
-/// The executors (table_job.cpp, conveyor_job.cpp).
+/// The executors (table_job.cpp, conveyor_job.cpp, assembly_job.cpp).
 ExecResult run_table_job(JobRun& run);
 ExecResult run_conveyor_job(JobRun& run);
+ExecResult run_assembly_job(JobRun& run);
+
+/// Checks an assembly job before it is accepted (assembly_job.cpp): the program compiles, its
+/// agent is an AGENT that every MOVE carries, every LOOK's camera is an immovable camera
+/// mapped to a cell camera, and the agent's nominal tool pose in every situation is inside
+/// the robot's limits. Every reason, one per line (kInvalidArgument).
+Status check_assembly(const task::AssemblySpec& spec, const kinematics::RobotModel& robot);
 
 }  // namespace cell::task_service

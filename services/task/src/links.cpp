@@ -334,6 +334,7 @@ Frame to_frame(const cell_vision_Detections& d) {
   Frame f;
   f.exposure_ns = d.header.stamp_ns;
   f.belt_count = d.belt_count;
+  f.image_sequence = d.image_sequence;
   f.error = std::string(bus::str(d.error));
   f.calibration = std::string(bus::str(d.calibration));
   f.processing_ms = d.processing_ms;

@@ -89,6 +89,7 @@ struct Frame {
   std::vector<Located> parts;
   std::int64_t exposure_ns = 0;  ///< wall clock, mid-exposure
   std::int64_t belt_count = 0;   ///< encoder count latched at exposure (belt cameras)
+  std::uint64_t image_sequence = 0;  ///< the image's (for EdgeRequests on the same image)
   std::string error;             ///< non-empty: the image could not be processed
   std::string calibration;       ///< what mapped pixels to the robot
   double processing_ms = 0.0;
@@ -227,6 +228,9 @@ class Links {
                  std::chrono::milliseconds timeout, const std::function<void()>& between);
 
   const std::string& client_id() const noexcept { return motions_.client_id(); }
+
+  /// The worker's participant (for an executor's own readers and requesters).
+  const bus::Participant& participant() const noexcept { return participant_; }
 
   /// The heartbeats of the cell's services (this worker's own directory).
   Peers& peers() noexcept { return peers_; }

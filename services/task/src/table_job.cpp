@@ -27,10 +27,6 @@ struct Target {
   int symmetry = 1;
 };
 
-std::string fresh_tag(const char* what, int seq) {
-  static thread_local std::mt19937_64 rng{std::random_device{}()};
-  return fmt::format("{}{}-{:06x}", what, seq, rng() & 0xFFFFFF);
-}
 
 /// Grasp height of a located part: the spec's, or the plane plus the class's grasp height.
 std::optional<double> grasp_height(JobRun& run, const task::TablePickPlaceSpec& spec,

@@ -54,23 +54,6 @@ cell_task_JobKind idl_kind(task::JobKind k) {
   return cell_task_JOB_TABLE_PICK_PLACE;
 }
 
-std::vector<std::string> split_lines(const std::string& text) {
-  std::vector<std::string> out;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    const std::size_t end = text.find('\n', start);
-    std::string line = text.substr(start, end == std::string::npos ? std::string::npos
-                                                                   : end - start);
-    if (!line.empty()) {
-      out.push_back(std::move(line));
-    }
-    if (end == std::string::npos) {
-      break;
-    }
-    start = end + 1;
-  }
-  return out;
-}
 
 /// Storage for one JobStatus sample's strings and sequences.
 struct StatusWire {
@@ -327,9 +310,14 @@ void TaskService::handle_request(const cell_task_JobRequest& request) {
       reasons.push_back(std::move(line));
     }
   }
-  if (spec->kind == task::JobKind::kAssembly) {
-    reasons.push_back("assembly jobs (RAPT programs on a robot) are not run by this version of "
-                      "the task service; the program can be checked with `cellctl rapt check`");
+  if (const auto* a = spec->assembly(); a != nullptr) {
+    if (const kinematics::RobotModel* model = facts().robots(spec->robot); model != nullptr) {
+      if (auto s = check_assembly(*a, *model); !s) {
+        for (auto& line : split_lines(s.error().message)) {
+          reasons.push_back(std::move(line));
+        }
+      }
+    }
   }
   if (!reasons.empty()) {
     reject(request, reasons);
@@ -636,7 +624,7 @@ void TaskService::worker_loop(Worker& worker) {
           result = run_conveyor_job(run);
           break;
         case task::JobKind::kAssembly:
-          result = ExecResult::failed("assembly jobs are not run by this version");
+          result = run_assembly_job(run);
           break;
       }
     } catch (const std::exception& e) {

@@ -54,6 +54,18 @@ struct NominalSolution {
 /// relations that remain and why they could not be combined) is reported to `diags` at the
 /// position of the statements concerned. Pure apart from `diags`; allocation proportional to
 /// bodies x situations + relations.
+/// A stated relation as the solver's Relation between its two bodies' frames (a = decl.a's
+/// body number, b = decl.b's): COPLANAR, ALIGNED and PARALLEL with their direction flipped.
+Relation relation_of(const Program& program, const RelationDecl& decl);
+
+/// How far two bodies at world_T_a and world_T_b (decl.a's body and decl.b's) are from
+/// satisfying a stated relation: {largest angular residual [rad], largest linear residual
+/// [mm]} (relation.hpp residual()). Checks an assembly's final situation by measured poses.
+std::pair<double, double> relation_residual(const Program& program,
+                                            const RelationDecl& decl,
+                                            const Pose& world_T_a,
+                                            const Pose& world_T_b);
+
 NominalSolution infer_nominal(const Program& program,
                               Diagnostics& diags,
                               const NominalOptions& options = {});

@@ -30,6 +30,11 @@ struct Reading {
 struct RunOptions {
   /// Also evaluate every package by least squares over all its LOOKs (lsq.hpp).
   bool least_squares = false;
+  /// Evaluate situations 1..through_situation only (0: all). Packages of later situations
+  /// need no readings and are not evaluated, and the FMs of later situations are left as the
+  /// identity (actual = nominal) with no actions: a live run (services/task) measures each
+  /// package when the robot reaches it, with everything before it corrected.
+  int through_situation = 0;
 };
 
 /// A package's run-time outcome.

@@ -97,13 +97,36 @@ struct ConveyorPickSpec {
 };
 
 /// The 1984 thesis's job: a RAPT program run by a robot, its LOOKs measured by the cameras.
+///
+/// Frames: the program's world frame W is placed in the robot's base frame by `base_T_world`
+/// (mm, base frame); the agent body's frame is related to the robot's tool frame by
+/// `agent_T_tool` (for a 6-axis arm whose tool z points down and a gripper body whose z is
+/// up: rpy (180, 0, 0)). A body pose world_T_agent of the program becomes the tool target
+/// base_T_tool = base_T_world * world_T_agent * agent_T_tool.
 struct AssemblySpec {
   std::string program_path;  ///< the program (relative to CELL_HOME) or ...
   std::string program_text;  ///< ... its text inline (`source:`); one of the two
   std::map<std::string, std::string> cameras;  ///< RAPT camera name -> camera id
-  enum class Method : std::uint8_t { kActual, kTwoStep };
-  Method method = Method::kActual;  ///< TA (7.13) or the two-step method (digest 003 §4.2)
+  /// How each move is executed (digest 003 §4.2): the actual action TA in one step (7.13);
+  /// method 1, the correction TC then the nominal action TN (the nominal approach direction
+  /// in the world, 7.15); method 2, through PN' (7.17), keeping the nominal approach relative
+  /// to the destination (e.g. a shaft along its hole's axis).
+  enum class Method : std::uint8_t { kActual, kTwoStepWorld, kTwoStepDestination };
+  Method method = Method::kActual;
   double speed_scale = 1.0;
+  std::string agent;  ///< the program's AGENT body the robot carries ("": its only one)
+  Eigen::Isometry3d base_T_world = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d agent_T_tool = Eigen::Isometry3d::Identity();
+  /// false: the vision packages are not measured (every FM stays the identity: the nominal
+  /// program, to see what the LOOKs correct).
+  bool verify = true;
+  /// A grasp the camera shows did not take its body (still where it was after the next move)
+  /// is retried this many times from the vision package that verified the body.
+  int max_retries = 2;
+  /// Largest distance [mm] / lens-axis angle [deg] between a program camera's declared pose
+  /// and its cell camera's calibrated one; beyond, the job fails before moving.
+  double camera_tolerance_mm = 50.0;
+  double camera_tolerance_deg = 10.0;
 };
 
 /// A parsed job.
