@@ -3,6 +3,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <numbers>
 #include <random>
 
 #include "cell/testing/matchers.hpp"
@@ -282,6 +283,61 @@ TEST(RunErrors, EveryUnmatchedOrMissingReadingIsNamed) {
                            "cam1)"));
   EXPECT_THAT(m, HasSubstr("a second reading for LOOK e1 of b1 with cam5 in situation 10"));
   EXPECT_THAT(m, HasSubstr("no reading for LOOK/e2 of b2, cam6 in situation 11"));
+}
+
+// A live run (services/task): through situation s, only the packages up to s need readings,
+// and what they give equals the whole run's up to s.
+TEST(RunThrough, EvaluatesUpToASituationWithTheReadingsTakenSoFar) {
+  const CompiledProgram& cp = testing::appendix_v();
+  const RunResult& whole = appendix_v_run();
+  std::vector<Reading> first;
+  for (const Reading& r : testing::appendix_v_readings()) {
+    if (r.situation <= 3) {
+      first.push_back(r);
+    }
+  }
+  RunOptions options;
+  options.through_situation = 9;  // before the package of situation 10
+  auto part = run(cp, first, options);
+  ASSERT_TRUE(part) << part.error().message;
+  for (int b = 1; b <= cp.program.body_count(); ++b) {
+    for (int s = 1; s <= 9; ++s) {
+      EXPECT_THAT(part->actual_pose(b, s), IsNearPose(whole.actual_pose(b, s), kTolMm))
+          << "body " << b << " situation " << s;
+    }
+    // Past it: not evaluated (the identity FM).
+    EXPECT_THAT(part->fm_of(b, 12), IsNearPose(Pose::Identity(), 0.0));
+  }
+  for (const ActionOutcome& a : part->actions) {
+    EXPECT_LE(a.situation, 9);
+  }
+  EXPECT_FALSE(part->packages[1].evaluated);  // situation 10's
+  // Through situation 10 its package needs its readings again.
+  options.through_situation = 10;
+  EXPECT_THAT(run(cp, first, options), IsErr(Errc::kInvalidArgument));
+}
+
+// An assembly's final relations checked at measured poses (tests/task/assembly_cell_test.cpp).
+TEST(RelationResidual, IsZeroAtTheNominalPosesAndMeasuresADisplacement) {
+  const CompiledProgram& cp = testing::appendix_v();
+  const Program& p = cp.program;
+  const Situation& sit = p.situation(16);
+  ASSERT_EQ(sit.relations.size(), 3U);
+  for (const RelationDecl& r : sit.relations) {
+    const auto [rad, mm] = relation_residual(p, r, cp.nominal_pose(r.a.body, 16),
+                                             cp.nominal_pose(r.b.body, 16));
+    EXPECT_LT(rad, 1e-9);
+    EXPECT_LT(mm, 1e-6);
+  }
+  // b3 slid 0.7 mm along the world's z and turned 1 degree about it: coplanar/f1 of b3, f3 of
+  // world (a vertical face) is off by the turn; against/f3 of b3, f2 of world (the floor) by
+  // the slide.
+  const Pose moved = Pose(Eigen::Translation3d(0, 0, 0.7) *
+                          Eigen::AngleAxisd(1.0 * std::numbers::pi / 180.0, V::UnitZ())) *
+                     cp.nominal_pose(testing::body(cp, "b3"), 16);
+  EXPECT_NEAR(relation_residual(p, sit.relations[0], moved, cp.nominal_pose(1, 16)).first,
+              1.0 * std::numbers::pi / 180.0, 1e-9);
+  EXPECT_GT(relation_residual(p, sit.relations[1], moved, cp.nominal_pose(1, 16)).second, 0.69);
 }
 
 TEST(RunErrors, ReadingsFilesAreCheckedKeyByKey) {

@@ -24,17 +24,22 @@ struct Cell {
                                                            "/config/robots/ibm7545.yaml");
   kinematics::RobotModel picker = *kinematics::load_robot(cell::testing::source_dir() +
                                                           "/config/robots/scara_picker.yaml");
+  kinematics::RobotModel excalibur = *kinematics::load_robot(cell::testing::source_dir() +
+                                                             "/config/robots/excalibur.yaml");
   world::Catalogue catalogue = world::Catalogue::standard();
   RobotLookup robots() const {
     return [this](std::string_view id) -> const kinematics::RobotModel* {
-      return id == "ibm7545" ? &ibm7545 : id == "scara_picker" ? &picker : nullptr;
+      return id == "ibm7545"        ? &ibm7545
+             : id == "scara_picker" ? &picker
+             : id == "excalibur"    ? &excalibur
+                                    : nullptr;
     };
   }
   CellFacts facts() const {
     CellFacts f;
     f.robots = robots();
     f.catalogue = &catalogue;
-    f.cameras = {"ibm7545_eye", "belt_cam"};
+    f.cameras = {"ibm7545_eye", "belt_cam", "assembly_cam"};
     f.belts = {"belt1"};
     // config/sim-world.yaml: the table top lies 231.51 mm below the 7545's flange at Z = 0,
     // belt1's surface 200 mm below the picker's.
@@ -78,13 +83,59 @@ TEST(JobSpec, TheThesisJobParsesWithItsOutputColumn) {
 
 TEST(JobSpec, TheShippedExampleJobsParseAndCheck) {
   const Cell cell;
-  for (const char* name : {"table_ics.yaml", "conveyor_ics.yaml", "conveyor_ics_fast.yaml"}) {
+  for (const char* name : {"table_ics.yaml", "conveyor_ics.yaml", "conveyor_ics_fast.yaml",
+                           "assembly_blocks.yaml"}) {
     std::ifstream f(cell::testing::source_dir() + "/config/jobs/" + name);
     const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
     auto job = parse_job_spec(text, name, cell.robots());
     ASSERT_THAT(job, IsOk()) << name;
     EXPECT_THAT(check_job(*job, cell.facts()), IsOk()) << name;
   }
+}
+
+// The assembly job's frames, method and options; its mistakes named with their lines.
+TEST(JobSpec, AnAssemblyJobReadsItsFramesMethodAndOptions) {
+  const Cell cell;
+  auto job = parse_job_spec(R"(kind: assembly
+robot: excalibur
+source: "terapt;"
+cameras: {cam1: assembly_cam}
+base_T_world: {xyz_mm: [450, 0, 0], rpy_deg: [0, 0, 90]}
+agent: grip
+agent_T_tool: {xyz_mm: [0, 0, 5], rpy_deg: [180, 0, 0]}
+method: two_step_destination
+verify: false
+max_retries: 1
+camera_tolerance: {mm: 20, deg: 4}
+)",
+                            "asm.yaml", cell.robots());
+  ASSERT_THAT(job, IsOk());
+  const AssemblySpec* a = job->assembly();
+  ASSERT_NE(a, nullptr);
+  EXPECT_EQ(a->cameras.at("cam1"), "assembly_cam");
+  EXPECT_NEAR((a->base_T_world * Eigen::Vector3d::UnitX()).y(), 1.0, 1e-12);  // turned 90 deg
+  EXPECT_NEAR(a->agent_T_tool.translation().z(), 5.0, 1e-12);
+  EXPECT_NEAR((a->agent_T_tool.linear() * Eigen::Vector3d::UnitZ()).z(), -1.0, 1e-12);
+  EXPECT_EQ(a->method, AssemblySpec::Method::kTwoStepDestination);
+  EXPECT_FALSE(a->verify);
+  EXPECT_EQ(a->max_retries, 1);
+  EXPECT_DOUBLE_EQ(a->camera_tolerance_mm, 20.0);
+  auto bad = parse_job_spec(R"(kind: assembly
+robot: excalibur
+program: a.rapt
+source: "terapt;"
+base_T_world: {xyz_mm: [450, 0], rpy_deg: [0, 0, 0]}
+method: sideways
+max_retries: 99
+)",
+                            "asm.yaml", cell.robots());
+  ASSERT_FALSE(bad);
+  const std::string& m = bad.error().message;
+  EXPECT_THAT(m, HasSubstr("give exactly one of program"));
+  EXPECT_THAT(m, HasSubstr("asm.yaml:5:"));  // base_T_world.xyz_mm
+  EXPECT_THAT(m, HasSubstr("agent_T_tool"));  // missing
+  EXPECT_THAT(m, HasSubstr("must be actual, two_step_world or two_step_destination"));
+  EXPECT_THAT(m, HasSubstr("max_retries"));
 }
 
 TEST(JobSpec, EveryErrorIsReportedWithItsLine) {

@@ -84,7 +84,7 @@ TEST(CalibrationConfig, TheShippedConfigLoads) {
   ::setenv("CELL_HOME", cell::testing::source_dir().c_str(), 1);
   auto c = load_config(*doc);
   ASSERT_THAT(c, IsOk());
-  EXPECT_EQ(c->cameras.size(), 2U);
+  EXPECT_EQ(c->cameras.size(), 3U);  // the 7545 eye, belt_cam, assembly_cam
   ASSERT_NE(c->hand_eye_for("ibm7545_eye"), nullptr);
   EXPECT_TRUE(c->hand_eye_for("ibm7545_eye")->options.planar);
   ASSERT_NE(c->belt_for("belt1"), nullptr);
