@@ -6,8 +6,12 @@
 // simulator's truth within 0.5 mm and 0.5 deg, and the same job with its vision package
 // switched off (verify: false) must leave them broken.
 
+#include <signal.h>
+
 #include <numbers>
+#include <random>
 #include <set>
+#include <thread>
 
 #include "cell/geometry/pose.hpp"
 #include "cell/rapt/ast.hpp"
@@ -178,6 +182,40 @@ parts:
   ASSERT_EQ(done.value("state", ""), "succeeded") << done.dump(2) << logs();
   EXPECT_EQ(done["counters"].value("grasp_missed", 0), 0) << done.dump(2);
   std::printf("3.2 mm and 2 deg off, with the vision package:\n");
+  const auto [deg, mm] = worst_relation();
+  EXPECT_LT(mm, 0.5);
+  EXPECT_LT(deg, 0.5);
+}
+
+// Durability: cell-task killed (SIGKILL) at random moments of the job and started again; the
+// job resumes at its last journaled situation with the readings it had taken.
+TEST_F(AssemblyCellTest, KilledTaskServiceResumesTheAssemblyAndTakesTheBlockOnce) {
+  start_assembly_cell();
+  if (HasFatalFailure()) {
+    return;
+  }
+  ToolRun r = submit(job_file(true), "asm-durable");
+  ASSERT_EQ(r.exit.code, 0) << r.output;
+  std::mt19937 rng(19841984);
+  std::uniform_int_distribution<int> pause_ms(700, 2500);
+  int kills = 0;
+  for (; kills < 8; ++kills) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms(rng)));
+    const std::string state = job("asm-durable").value("state", "");
+    if (state == "succeeded" || state == "failed") {
+      break;
+    }
+    process::Child* task = child(kills == 0 ? "task" : fmt::format("task{}", kills));
+    ASSERT_NE(task, nullptr);
+    ASSERT_EQ(::kill(task->pid(), SIGKILL), 0);
+    (void)task->wait_for(5s);
+    start(fmt::format("task{}", kills + 1), "cell-task", dir_ + "/task.yaml");
+  }
+  std::printf("killed cell-task %d times during the assembly\n", kills);
+  EXPECT_GE(kills, 3);
+  const json done = wait_end("asm-durable", 600s);
+  ASSERT_EQ(done.value("state", ""), "succeeded") << done.dump(2) << logs();
+  EXPECT_EQ(grasps_in_world_log(), 1U);  // blk taken once
   const auto [deg, mm] = worst_relation();
   EXPECT_LT(mm, 0.5);
   EXPECT_LT(deg, 0.5);
