@@ -196,22 +196,7 @@ TEST_F(AssemblyCellTest, KilledTaskServiceResumesTheAssemblyAndTakesTheBlockOnce
   }
   ToolRun r = submit(job_file(true), "asm-durable");
   ASSERT_EQ(r.exit.code, 0) << r.output;
-  std::mt19937 rng(19841984);
-  std::uniform_int_distribution<int> pause_ms(700, 2500);
-  int kills = 0;
-  for (; kills < 8; ++kills) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms(rng)));
-    const std::string state = job("asm-durable").value("state", "");
-    if (state == "succeeded" || state == "failed") {
-      break;
-    }
-    process::Child* task = child(kills == 0 ? "task" : fmt::format("task{}", kills));
-    ASSERT_NE(task, nullptr);
-    ASSERT_EQ(::kill(task->pid(), SIGKILL), 0);
-    (void)task->wait_for(5s);
-    start(fmt::format("task{}", kills + 1), "cell-task", dir_ + "/task.yaml");
-  }
-  std::printf("killed cell-task %d times during the assembly\n", kills);
+  const int kills = kill_task_during("asm-durable", 8, 19841984, 700, 2500);
   EXPECT_GE(kills, 3);
   const json done = wait_end("asm-durable", 600s);
   ASSERT_EQ(done.value("state", ""), "succeeded") << done.dump(2) << logs();

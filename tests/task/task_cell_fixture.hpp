@@ -4,6 +4,7 @@
 // driven by cellctl like an operator would. Ground truth comes from the world simulator
 // (`cellctl world parts --json`). Every wait is a condition with a deadline.
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -12,7 +13,9 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <fmt/format.h>
@@ -326,6 +329,33 @@ class TaskCellTest : public TaskCell {
     }
     std::printf("parts in their slots: worst %.3f mm, %.3f deg (bounds 0.5 mm, 1 deg)\n",
                 worst_mm, worst_deg);
+  }
+
+  /// Kills cell-task (SIGKILL) up to `max_kills` times while job `id` runs, each after a
+  /// random pause of `min_ms`..`max_ms` (seeded: the same moments every run), and starts it
+  /// again each time. Returns how many kills there were.
+  int kill_task_during(const std::string& id, int max_kills, unsigned seed, int min_ms,
+                       int max_ms) {
+    std::mt19937 rng(seed);
+    std::uniform_int_distribution<int> pause_ms(min_ms, max_ms);
+    int kills = 0;
+    for (; kills < max_kills; ++kills) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms(rng)));
+      const std::string state = job(id).value("state", "");
+      if (state == "succeeded" || state == "failed") {
+        break;
+      }
+      process::Child* task = child(kills == 0 ? "task" : fmt::format("task{}", kills));
+      if (task == nullptr) {
+        ADD_FAILURE() << "no task process to kill";
+        break;
+      }
+      EXPECT_EQ(::kill(task->pid(), SIGKILL), 0);
+      (void)task->wait_for(5s);
+      start(fmt::format("task{}", kills + 1), "cell-task", dir_ + "/task.yaml");
+    }
+    std::printf("killed cell-task %d times during job %s\n", kills, id.c_str());
+    return kills;
   }
 
   /// How many times sim-world attached a part to a gripper (every grasp that took a part).

@@ -183,22 +183,7 @@ TEST_F(TaskCellTest, KilledTwentyTimesTheTableJobStillPlacesEveryPartOnce) {
 
   r = submit(cell::testing::source_dir() + "/config/jobs/table_ics.yaml", "durable-1");
   ASSERT_EQ(r.exit.code, 0) << r.output;
-  std::mt19937 rng(20261201);
-  std::uniform_int_distribution<int> pause_ms(1500, 5000);
-  int kills = 0;
-  for (; kills < 20; ++kills) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms(rng)));
-    const std::string state = job("durable-1").value("state", "");
-    if (state == "succeeded" || state == "failed") {
-      break;
-    }
-    process::Child* task = child(kills == 0 ? "task" : fmt::format("task{}", kills));
-    ASSERT_NE(task, nullptr);
-    ASSERT_EQ(::kill(task->pid(), SIGKILL), 0);
-    (void)task->wait_for(5s);
-    start(fmt::format("task{}", kills + 1), "cell-task", dir_ + "/task.yaml");
-  }
-  std::printf("killed cell-task %d times during the job\n", kills);
+  const int kills = kill_task_during("durable-1", 20, 20261201, 1500, 5000);
   EXPECT_GE(kills, 15);  // most of them while the job ran
   const json status = wait_end("durable-1", 600s);
   EXPECT_EQ(status["state"], "succeeded") << status.dump(2) << logs();

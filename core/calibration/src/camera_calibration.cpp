@@ -12,6 +12,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include "cell/bus/view.hpp"
+#include "cell/config/pose.hpp"
 #include "cell/config/yaml.hpp"
 #include "cell/geometry/idl_pose.hpp"
 #include "cell/geometry/pose.hpp"
@@ -36,17 +37,7 @@ Error invalid(const std::string& camera_id, const std::string& what) {
                fmt::format("camera calibration '{}': {}", camera_id, what)};
 }
 
-/// {xyz_mm: [x, y, z], rpy_deg: [roll, pitch, yaw]}: R = Rz(yaw) Ry(pitch) Rx(roll).
-Eigen::Isometry3d read_pose(config::MapReader& parent, const std::string& key) {
-  config::MapReader r = parent.child(key, true);
-  std::array<double, 3> xyz{};
-  std::array<double, 3> rpy{};
-  r.required("xyz_mm", xyz);
-  r.required("rpy_deg", rpy);
-  parent.absorb(r);
-  return geometry::make_pose(Eigen::Vector3d(xyz[0], xyz[1], xyz[2]),
-                             geometry::Rpy{rpy[0] * kDeg, rpy[1] * kDeg, rpy[2] * kDeg});
-}
+using config::read_pose;
 
 /// 17 significant digits: a double survives the round trip through text exactly.
 std::string num(double v) { return fmt::format("{:.17g}", v); }

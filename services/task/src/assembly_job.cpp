@@ -368,15 +368,15 @@ class AssemblyJob {
     if (!rr) {
       return rr.error();
     }
-    const rapt::Program& program = cp_.program;
     for (const rapt::CompiledLook& look : pkg.looks) {
       if (!look.used) {
         continue;
       }
-      const rapt::Camera& cam = program.cameras[static_cast<std::size_t>(look.decl.camera)];
-      const CellCamera& cell = cells_.at(cam.name);
-      const rapt::CameraModel model{cam.world_T_camera, cam.focus};
-      const auto [e1, e2] = program.feature(look.decl.edge).edge_end_points();
+      const LookGeometry g = geometry_of(look);
+      const CellCamera& cell = g.cell;
+      const rapt::CameraModel& model = g.model;
+      const Eigen::Vector3d& e1 = g.e1;
+      const Eigen::Vector3d& e2 = g.e2;
       const Pose at = rr->actual_pose(pkg.body, grasped);
       auto i1 = model.project(at * e1);
       auto i2 = model.project(at * e2);
@@ -621,6 +621,24 @@ class AssemblyJob {
     return std::nullopt;
   }
 
+  /// A LOOK's camera (program and cell) and the end points of its edge in the body frame.
+  struct LookGeometry {
+    const rapt::Camera& cam;
+    const CellCamera& cell;
+    rapt::CameraModel model;
+    const rapt::Feature& edge;
+    Eigen::Vector3d e1;
+    Eigen::Vector3d e2;
+  };
+  LookGeometry geometry_of(const rapt::CompiledLook& look) const {
+    const rapt::Program& program = cp_.program;
+    const rapt::Camera& cam = program.cameras[static_cast<std::size_t>(look.decl.camera)];
+    const rapt::Feature& edge = program.feature(look.decl.edge);
+    const auto [e1, e2] = edge.edge_end_points();
+    return {cam, cells_.at(cam.name), rapt::CameraModel{cam.world_T_camera, cam.focus}, edge,
+            e1, e2};
+  }
+
   /// RAPT image point -> pixel of a cell camera; nullopt outside the lens's valid field.
   std::optional<Eigen::Vector2d> to_pixel(const CellCamera& c, double focus,
                                           const ImagePoint& p) const {
@@ -654,11 +672,13 @@ class AssemblyJob {
       if (!look.used) {
         continue;
       }
-      const rapt::Camera& cam = program.cameras[static_cast<std::size_t>(look.decl.camera)];
-      const CellCamera& cell = cells_.at(cam.name);
-      const rapt::CameraModel model{cam.world_T_camera, cam.focus};
-      const rapt::Feature& edge = program.feature(look.decl.edge);
-      const auto [e1, e2] = edge.edge_end_points();
+      const LookGeometry g = geometry_of(look);
+      const rapt::Camera& cam = g.cam;
+      const CellCamera& cell = g.cell;
+      const rapt::CameraModel& model = g.model;
+      const rapt::Feature& edge = g.edge;
+      const Eigen::Vector3d& e1 = g.e1;
+      const Eigen::Vector3d& e2 = g.e2;
       const Eigen::Vector3d q1 = body_before * e1;
       const Eigen::Vector3d q2 = body_before * e2;
       auto i1 = model.project(q1);

@@ -7,34 +7,14 @@
 #include <numbers>
 #include <set>
 
+#include "cell/config/pose.hpp"
 #include "cell/geometry/pose.hpp"
 #include "cell/service/paths.hpp"
 #include "cell/vision/options.hpp"
 
 namespace cell::vision {
-namespace {
 
-constexpr double kDegToRad = std::numbers::pi / 180.0;
-
-Eigen::Isometry3d read_pose(config::MapReader& parent, const std::string& key) {
-  config::MapReader r = parent.child(key, true);
-  std::array<double, 3> xyz{};
-  std::array<double, 3> rpy{};
-  r.required("xyz_mm", xyz);
-  r.required("rpy_deg", rpy);
-  for (std::size_t i = 0; i < 3; ++i) {
-    if (!std::isfinite(xyz[i]) || !std::isfinite(rpy[i])) {
-      r.fail("", "values must be finite");
-      break;
-    }
-  }
-  parent.absorb(r);
-  return geometry::make_pose(
-      Eigen::Vector3d(xyz[0], xyz[1], xyz[2]),
-      geometry::Rpy{rpy[0] * kDegToRad, rpy[1] * kDegToRad, rpy[2] * kDegToRad});
-}
-
-}  // namespace
+using config::read_pose;
 
 const CameraEntry* VisionConfig::camera(const std::string& id) const {
   for (const CameraEntry& c : cameras) {
