@@ -53,17 +53,20 @@ class AssemblyCellTest : public TaskCellTest {
         << logs();
   }
 
-  /// The shipped job with `verify` set.
-  std::string job_file(bool verify) {
+  /// The shipped job with `verify` and `method` set.
+  std::string job_file(bool verify, const std::string& method = "actual") {
     std::ifstream f(cell::testing::source_dir() + "/config/jobs/assembly_blocks.yaml");
     std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-    const std::string key = "verify: true";
-    const auto at = text.find(key);
-    EXPECT_NE(at, std::string::npos);
-    if (at != std::string::npos && !verify) {
-      text.replace(at, key.size(), "verify: false");
+    for (const auto& [key, value] :
+         {std::pair<std::string, std::string>{"verify: true", verify ? "true" : "false"},
+          {"method: actual", method}}) {
+      const auto at = text.find(key);
+      EXPECT_NE(at, std::string::npos) << key;
+      if (at != std::string::npos) {
+        text.replace(at, key.size(), key.substr(0, key.find(' ') + 1) + value);
+      }
     }
-    return write(verify ? "assembly.yaml" : "assembly_blind.yaml", text);
+    return write(fmt::format("assembly_{}_{}.yaml", verify, method), text);
   }
 
   /// W_T_body of a simulated part (the RAPT body frame is the class's model frame).
@@ -185,6 +188,28 @@ parts:
   const auto [deg, mm] = worst_relation();
   EXPECT_LT(mm, 0.5);
   EXPECT_LT(deg, 0.5);
+}
+
+// Yin's two-step methods (digest 003 §4.2): the correction first in world axes (7.15), or
+// through PN' keeping the approach relative to the destination (7.17): the same end.
+TEST_F(AssemblyCellTest, BothTwoStepMethodsEndWhereTheOneStepActionDoes) {
+  start_assembly_cell();
+  if (HasFatalFailure()) {
+    return;
+  }
+  for (const char* method : {"two_step_world", "two_step_destination"}) {
+    ToolRun r = cellctl({"world", "reset"});
+    ASSERT_EQ(r.exit.code, 0) << r.output;
+    const std::string id = std::string("asm-") + method;
+    r = submit(job_file(true, method), id);
+    ASSERT_EQ(r.exit.code, 0) << r.output;
+    const json done = wait_end(id, 300s);
+    ASSERT_EQ(done.value("state", ""), "succeeded") << done.dump(2) << logs();
+    std::printf("%s:\n", method);
+    const auto [deg, mm] = worst_relation();
+    EXPECT_LT(mm, 0.5) << method;
+    EXPECT_LT(deg, 0.5) << method;
+  }
 }
 
 // Durability: cell-task killed (SIGKILL) at random moments of the job and started again; the
