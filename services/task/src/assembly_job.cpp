@@ -245,6 +245,8 @@ class AssemblyJob {
         return *e;
       }
       const rapt::Action& action = program.situation(s).action;
+      run_.report(fmt::format("situation {} of {}", s, total),
+                  static_cast<double>(s - 1) / static_cast<double>(total));
       std::optional<ExecResult> e;
       std::string done;
       if (s == 1) {
@@ -477,7 +479,7 @@ class AssemblyJob {
     c.id = camera_id;
     c.lens = *lens;
     c.world_T_camera = spec_.base_T_world.inverse() * found->extrinsics;
-    c.version = found->version;
+    c.version = found->version.empty() ? found->source : found->version;
     return c;
   }
 
@@ -695,9 +697,9 @@ class AssemblyJob {
       if (spec_.verify) {
         auto measured = measure(s, cell, model, q1, q2, *i1, *i2, pkg, images);
         if (!measured) {
-          return ExecResult::failed(fmt::format("situation {}: LOOK {} of {} with {} ({}): {}", s,
-                                                edge.name, body, cam.name, cell.id,
-                                                measured.error().message));
+          return ExecResult::failed(fmt::format(
+              "situation {}: LOOK {} of {} with {} ({}, calibration {}): {}", s, edge.name, body,
+              cam.name, cell.id, cell.version, measured.error().message));
         }
         reading.p1 = measured->first;
         reading.p2 = measured->second;
