@@ -834,7 +834,6 @@ class AssemblyJob {
       if (!moves) {
         continue;
       }
-      const Eigen::Isometry3d first = spec_.base_T_world * rr->actual_pose(b, 1);
       int verified_in = 1;
       for (const auto& pkg : cp_.packages) {
         if (pkg.body == b && pkg.fixable) {
@@ -845,7 +844,6 @@ class AssemblyJob {
       const Eigen::Isometry3d picked = spec_.base_T_world * rr->actual_pose(b, verified_in);
       const Eigen::Isometry3d last =
           spec_.base_T_world * rr->actual_pose(b, program.situation_count());
-      (void)first;
       PartRecord rec;
       rec.index = index++;
       rec.class_name = program.body(b).name;
