@@ -733,7 +733,13 @@ void World::drop(Part& part) {
 Status World::update_robot(std::string_view robot_id,
                            const Eigen::Isometry3d& base_T_tool,
                            GripperState gripper,
-                           std::vector<WorldEvent>& events) {
+                           std::vector<WorldEvent>& events,
+                           double age_s) {
+  if (!(std::abs(age_s) <= kMaxAgeS)) {
+    return Error{Errc::kInvalidArgument,
+                 fmt::format("the robot state's age {} s is outside +-{} s of the world's time",
+                             age_s, kMaxAgeS)};
+  }
   auto it = std::find_if(robots_.begin(), robots_.end(),
                          [&](const RobotSlot& r) { return r.mount.robot_id == robot_id; });
   if (it == robots_.end()) {
@@ -766,14 +772,27 @@ Status World::update_robot(std::string_view robot_id,
     return ok_status();  // first observation: nothing is known to have changed
   }
   if (closed_like(gripper) && !closed_like(before)) {
-    capture(robot, events);
+    capture(robot, age_s, events);
   } else if (open_like(gripper) && !open_like(before)) {
     release(robot, events);
   }
   return ok_status();
 }
 
-void World::capture(RobotSlot& robot, std::vector<WorldEvent>& events) {
+Eigen::Vector3d World::support_velocity(const Part& part) const {
+  if (part.support.kind != Support::Kind::kBelt) {
+    return Eigen::Vector3d::Zero();
+  }
+  for (const Belt& belt : belts_) {
+    if (belt.spec.id == part.support.id) {
+      return belt.spec.speed_mm_s * Eigen::Vector3d(std::cos(belt.spec.direction_rad),
+                                                    std::sin(belt.spec.direction_rad), 0.0);
+    }
+  }
+  return Eigen::Vector3d::Zero();
+}
+
+void World::capture(RobotSlot& robot, double age_s, std::vector<WorldEvent>& events) {
   const Eigen::Isometry3d& tool = *robot.world_T_tool;
   const Eigen::Vector3d p = tool.translation();
   const std::string& robot_id = robot.mount.robot_id;
@@ -801,7 +820,9 @@ void World::capture(RobotSlot& robot, std::vector<WorldEvent>& events) {
     if (part.support.kind == Support::Kind::kRobot) {
       continue;
     }
-    const Eigen::Isometry3d grasp = part.world_T_grasp();
+    // Where the grasp point was at the observation's instant.
+    const Eigen::Isometry3d grasp =
+        Eigen::Translation3d(-age_s * support_velocity(part)) * part.world_T_grasp();
     const double dist = (grasp.translation() - p).norm();
     const double yaw_error = fold(tool_yaw - yaw_of(grasp.linear()), part.cls->yaw_symmetry);
     if (dist < nearest_distance) {
@@ -836,7 +857,9 @@ void World::capture(RobotSlot& robot, std::vector<WorldEvent>& events) {
     return;
   }
   Part& part = parts_[static_cast<std::size_t>(best)];
-  part.tool_T_part = tool.inverse() * part.world_T_part;
+  // Held as it was at the observation's instant; from now on it moves with the tool.
+  part.tool_T_part =
+      tool.inverse() * Eigen::Translation3d(-age_s * support_velocity(part)) * part.world_T_part;
   const std::string from = part.support_name;
   set_support(part, Support{Support::Kind::kRobot, robot_id});
   ++seq_;

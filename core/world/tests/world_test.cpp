@@ -452,6 +452,50 @@ TEST(WorldBelt, ReleasedOverTheBeltThePartRidesAlong) {
   EXPECT_THAT(w.set_belt_speed("b1", NAN), IsErrWith(Errc::kInvalidArgument, "finite"));
 }
 
+// A robot state is stamped when its joints were read and reaches the world later: the capture
+// compares the tool with the part where it was at that instant, not where the belt has moved
+// it since (a tool tracking a 2 m/s belt exactly, seen 1.5 ms late, is 3 mm behind its part).
+TEST(WorldBelt, ACaptureComparesTheToolWithThePartAtTheStatesInstant) {
+  const std::string parts = "  - {id: p, class: rectangle, x_mm: 1000, y_mm: -80}\n";
+  for (const bool with_age : {true, false}) {
+    World w = belt_world(parts, 2000.0);
+    std::vector<WorldEvent> events;
+    for (int i = 0; i < 100; ++i) {
+      w.step(0.001, events);
+    }
+    const Eigen::Isometry3d now = w.find("p")->world_T_grasp();
+    EXPECT_NEAR(now.translation().x(), 1200.0, 1e-9);
+    // 1.5 ms before the world's present the part, and the tool on it, were 3 mm upstream.
+    const double age_s = with_age ? 0.0015 : 0.0;
+    const Eigen::Isometry3d tool = Eigen::Translation3d(-3.0, 0, 0) * now;
+    const Eigen::Isometry3d b = base_T(w, "picker", tool);
+    events.clear();
+    for (const GripperState g : {GripperState::kOpen, GripperState::kClosing}) {
+      ASSERT_THAT(w.update_robot("picker", b, g, events, age_s), IsOk());
+    }
+    if (with_age) {
+      const auto attached = of_kind(events, WorldEvent::Kind::kAttached);
+      ASSERT_EQ(attached.size(), 1U);
+      EXPECT_THAT(attached[0].detail, HasSubstr("(0.00 mm from its grasp point)"));
+      // Held as it was then: the next state, 1 ms later and 2 mm on, carries it exactly.
+      ASSERT_THAT(w.update_robot("picker", base_T(w, "picker", Eigen::Translation3d(2, 0, 0) * tool),
+                                 GripperState::kClosed, events, 0.0005),
+                  IsOk());
+      EXPECT_THAT(w.find("p")->world_T_grasp(),
+                  IsNearPose(Eigen::Translation3d(-1.0, 0, 0) * now, 1e-9));
+    } else {
+      const auto missed = of_kind(events, WorldEvent::Kind::kMissed);
+      ASSERT_EQ(missed.size(), 1U);
+      EXPECT_THAT(missed[0].detail, HasSubstr("is 3.00 mm away (tolerance 2.00 mm)"));
+    }
+  }
+  World w = belt_world(parts, 2000.0);
+  std::vector<WorldEvent> events;
+  EXPECT_THAT(w.update_robot("picker", Eigen::Isometry3d::Identity(), GripperState::kOpen, events,
+                             2.0),
+              IsErrWith(Errc::kInvalidArgument, "age 2 s is outside +-1 s"));
+}
+
 TEST(WorldEdit, SpawnRemoveAndTheirErrors) {
   World w = table_world();
   const std::uint64_t seq = w.seq();

@@ -94,7 +94,13 @@ void SimWorldService::take_robot_states() {
           log::warn("robot_state", pose.error().message, {{"robot", robot_id}});
           return;
         }
-        auto status = world_.update_robot(robot_id, *pose, world::from_idl(s.gripper), events_);
+        double age_s = 0.0;
+        if (world_wall_ns_ > 0 && s.header.stamp_ns > 0) {
+          age_s = static_cast<double>(world_wall_ns_ - s.header.stamp_ns) * 1e-9;
+          age_s = std::abs(age_s) <= kMaxStateAgeS ? age_s : 0.0;
+        }
+        auto status =
+            world_.update_robot(robot_id, *pose, world::from_idl(s.gripper), events_, age_s);
         if (!status) {
           // A robot this world does not mount (another cell's, or a config gap): say so once.
           if (unknown_robots_.insert(std::string(robot_id)).second) {
@@ -359,6 +365,7 @@ void SimWorldService::run(service::Context& ctx) {
     int steps = 0;
     while (now >= next && steps < kMaxCatchUpSteps) {
       world_.step(dt_s, events_);
+      world_wall_ns_ = wall_time_ns();
       ++ticks;
       ++steps;
       next += period;

@@ -151,12 +151,20 @@ class World {
   /// y and yaw about the vertical) onto the highest surface below its origin (a belt, the table
   /// or the floor): kReleased. The first observation of a robot only records its state;
   /// kUnknown never changes it.
-  /// Errors: kInvalidArgument for a robot without a mount or a non-rigid pose (nothing
-  /// changes).
+  /// `age_s`: how long before the world's present (time_s()) the observation was true (its
+  /// stamp; negative when the state is newer than the last step). A capture compares the tool
+  /// with the parts where they were at that instant: a part on a belt at v was v * age_s
+  /// upstream of where the world has it now. (Without it, a state 1 ms old puts a tool that
+  /// tracks a 2 m/s belt exactly 2 mm behind its part.) It must be within +-kMaxAgeS.
+  /// Errors: kInvalidArgument for a robot without a mount, a non-rigid pose or an age out of
+  /// range (nothing changes).
   Status update_robot(std::string_view robot_id,
                       const Eigen::Isometry3d& base_T_tool,
                       GripperState gripper,
-                      std::vector<WorldEvent>& events);
+                      std::vector<WorldEvent>& events,
+                      double age_s = 0.0);
+  /// The largest |age_s| update_robot takes [s].
+  static constexpr double kMaxAgeS = 1.0;
 
   // ---- edits (every one bumps seq()) ----
 
@@ -227,7 +235,9 @@ class World {
                                double min_separation_mm,
                                std::ptrdiff_t ignore = -1) const;
   std::string next_id();
-  void capture(RobotSlot& robot, std::vector<WorldEvent>& events);
+  void capture(RobotSlot& robot, double age_s, std::vector<WorldEvent>& events);
+  /// The velocity of a part's support in the world frame [mm/s] (a belt's; else zero).
+  Eigen::Vector3d support_velocity(const Part& part) const;
   void release(RobotSlot& robot, std::vector<WorldEvent>& events);
   void drop(Part& part);
   void step_belt(std::size_t belt_index, double dt_s, std::vector<WorldEvent>& events);
