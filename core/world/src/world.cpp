@@ -780,16 +780,13 @@ Status World::update_robot(std::string_view robot_id,
 }
 
 Eigen::Vector3d World::support_velocity(const Part& part) const {
-  if (part.support.kind != Support::Kind::kBelt) {
+  const Belt* belt =
+      part.support.kind == Support::Kind::kBelt ? find_belt(part.support.id) : nullptr;
+  if (belt == nullptr) {
     return Eigen::Vector3d::Zero();
   }
-  for (const Belt& belt : belts_) {
-    if (belt.spec.id == part.support.id) {
-      return belt.spec.speed_mm_s * Eigen::Vector3d(std::cos(belt.spec.direction_rad),
-                                                    std::sin(belt.spec.direction_rad), 0.0);
-    }
-  }
-  return Eigen::Vector3d::Zero();
+  return belt->spec.speed_mm_s * Eigen::Vector3d(std::cos(belt->spec.direction_rad),
+                                                 std::sin(belt->spec.direction_rad), 0.0);
 }
 
 void World::capture(RobotSlot& robot, double age_s, std::vector<WorldEvent>& events) {
