@@ -456,6 +456,7 @@ void Dpr7545Driver::track_sample(std::int64_t seen, bool started_before) noexcep
       }
     }
   }
+  sample_gap_ns_ = previous > 0 ? sample_ns_ - previous : period_ns_;
   last_sample_ns_ = sample_ns_;
 }
 
@@ -622,6 +623,7 @@ CycleStatus Dpr7545Driver::read(Clock::time_point now, JointState& state) {
 }
 
 CycleStatus Dpr7545Driver::write(Clock::time_point now, const JointSetpoint& setpoint) {
+  applied_valid_ = false;
   if (!handshake_open_) {
     return CycleStatus::kOk;  // no exchange this cycle (idle slave, procedure, retry)
   }
@@ -637,6 +639,16 @@ CycleStatus Dpr7545Driver::write(Clock::time_point now, const JointSetpoint& set
     max_skew_ns_.store(std::abs(bounded_skew), std::memory_order_relaxed);
   }
   const double skew_s = static_cast<double>(bounded_skew) * 1e-9;
+  // The derivative's interval: the nominal Ts, as the thesis, while the samples come a period
+  // apart, even when a simulator's came irregularly (a difference of one-count-quantised
+  // positions over a short interval is noise, and dividing it by that interval would amplify
+  // it out of the DAC range). After periods were missed (this host stalled past them, which the
+  // board never does), the error's change spans the whole gap: over Ts it would be a kick of
+  // gap / Ts times the damping, out of the DAC range after a stall of a few periods.
+  const double derivative_s =
+      sample_gap_ns_ > period_ns_ * 3 / 2
+          ? static_cast<double>(std::min(sample_gap_ns_, 20 * period_ns_)) * 1e-9
+          : period_s_;
   for (int j = 0; j < kJoints; ++j) {
     const auto i = idx(j);
     const double actual = position_[i];
@@ -649,15 +661,14 @@ CycleStatus Dpr7545Driver::write(Clock::time_point now, const JointSetpoint& set
       offset_[i] = offset_[i] > 0 ? std::max(0.0, offset_[i] - engage_step_counts_[i])
                                   : std::min(0.0, offset_[i] + engage_step_counts_[i]);
     }
-    const double e = desired + offset_[i] - actual;
+    applied_[i] = desired + offset_[i];
+    const double e = applied_[i] - actual;
     const double e_prev = fresh_engage_ ? e : error_[i];
-    // kv / Ts with the nominal Ts, as the thesis, even when a simulator's samples came
-    // irregularly: a difference of one-count-quantised positions over a short interval is
-    // noise, and dividing it by that interval would amplify it out of the DAC range.
-    words_[i] = d::torque_word(d::pd_torque(kp_[i], kv_[i], period_s_, e, e_prev));
+    words_[i] = d::torque_word(d::pd_torque(kp_[i], kv_[i], derivative_s, e, e_prev));
     error_[i] = e;
   }
   fresh_engage_ = false;
+  applied_valid_ = sized;
   for (int j = 0; j < kJoints; ++j) {
     dpr_->set_torque(j, words_[idx(j)]);
   }
@@ -691,6 +702,17 @@ CycleStatus Dpr7545Driver::write(Clock::time_point now, const JointSetpoint& set
     return CycleStatus::kRetry;
   }
   return CycleStatus::kOk;
+}
+
+bool Dpr7545Driver::applied_setpoint(JointVector& out) const noexcept {
+  if (!applied_valid_) {
+    return false;
+  }
+  out.resize(kJoints);
+  for (int j = 0; j < kJoints; ++j) {
+    out[j] = applied_[idx(j)] / counts_per_unit_[idx(j)];
+  }
+  return true;
 }
 
 Status Dpr7545Driver::begin_leave(Procedure next) noexcept {

@@ -128,6 +128,7 @@ class Dpr7545Driver final : public RobotDriver {
   void on_cleanup() noexcept override;
   CycleStatus read(Clock::time_point now, JointState& state) override;
   CycleStatus write(Clock::time_point now, const JointSetpoint& setpoint) override;
+  bool applied_setpoint(JointVector& out) const noexcept override;
   Status command(DriverCommand command, const CommandArgs& args) override;
   bool supports(DriverCommand command) const noexcept override;
   std::string describe_faults(std::uint32_t bits) const override;
@@ -180,6 +181,7 @@ class Dpr7545Driver final : public RobotDriver {
   std::int64_t cycle_deadline_ns_ = 0;
   std::int64_t sample_ns_ = 0;       ///< when the slave sampled this period's positions
   std::int64_t last_sample_ns_ = 0;
+  std::int64_t sample_gap_ns_ = 0;  ///< sample_ns_ minus the previous exchange's [ns]
   /// A simulator's control block, which tells the sampling instants (empty on the real card).
   std::optional<dpr7545::SimControl> sim_clock_;
   bool handshake_open_ = false;
@@ -200,6 +202,10 @@ class Dpr7545Driver final : public RobotDriver {
   std::array<double, dpr7545::kJoints> velocity_counts_s_{};
   std::array<double, dpr7545::kJoints> error_{};
   std::array<double, dpr7545::kJoints> offset_{};
+  /// The PD loop's reference of the last exchange [counts] (desired + offset_), valid while
+  /// applied_valid_.
+  std::array<double, dpr7545::kJoints> applied_{};
+  bool applied_valid_ = false;
   std::array<std::uint16_t, dpr7545::kJoints> words_{};
   /// The words of the exchange that faulted (words_ is zeroed by stop_control), for
   /// describe_faults.

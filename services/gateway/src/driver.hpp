@@ -87,6 +87,13 @@ class RobotDriver {
   virtual CycleStatus read(Clock::time_point now, JointState& state) = 0;
   virtual CycleStatus write(Clock::time_point now, const JointSetpoint& setpoint) = 0;
 
+  /// The setpoint the controller was given by the last write(), where the driver changed the
+  /// host's (7545: moved to the board's sampling instant, plus the bumpless engage offset),
+  /// in the host's joint units: the reference its loop followed, the same instant as the
+  /// joints read(). False when the controller got the host's setpoint unchanged, or when the
+  /// last write() made no exchange. Real-time safe (no allocation: `out` has fixed capacity).
+  virtual bool applied_setpoint(JointVector& /*out*/) const noexcept { return false; }
+
   /// Starts a non-cyclic command; progress shows in JointState (busy, homed, gripper).
   /// Errors: kNotReady when the controller cannot take it now (moving, faulted), with why.
   virtual Status command(DriverCommand command, const CommandArgs& args) = 0;

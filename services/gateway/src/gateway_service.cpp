@@ -147,7 +147,7 @@ void GatewayService::publish_state(const ServoSnapshot& s,
                                    const bus::Writer<cell_robot_RobotState>& writer) {
   const std::vector<double> q(s.measured.q.data(), s.measured.q.data() + s.measured.q.size());
   const std::vector<double> qd(s.measured.qd.data(), s.measured.qd.data() + s.measured.qd.size());
-  const std::vector<double> sp(s.setpoint.q.data(), s.setpoint.q.data() + s.setpoint.q.size());
+  const std::vector<double> sp(s.commanded.data(), s.commanded.data() + s.commanded.size());
   const std::vector<double> effort(s.measured.effort.data(),
                                    s.measured.effort.data() + s.measured.effort.size());
   const std::string frame = model_.id() + "/base";

@@ -412,17 +412,23 @@ void Servo::cycle(Clock::time_point now) {
   }
 
   // Write the controller.
+  bool applied = false;
   if (mode_ != cell_robot_MODE_FAULT) {
     const CycleStatus write_status = driver_->write(now, setpoint_);
     if (write_status == CycleStatus::kFault) {
       fault(measured_.fault_bits, driver_->describe_faults(measured_.fault_bits));
     }
+    applied = driver_->applied_setpoint(applied_);
+  }
+  if (!applied) {
+    applied_ = setpoint_.q;
   }
 
   ++cycle_;
   std::lock_guard lock(mutex_);
   snapshot_.measured = measured_;
   snapshot_.setpoint = setpoint_;
+  snapshot_.commanded = applied_;
   auto pose = model_.forward(measured_.q);
   snapshot_.base_T_tool = pose ? *pose : Eigen::Isometry3d::Identity();
   snapshot_.mode = mode_;

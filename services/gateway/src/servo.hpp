@@ -23,6 +23,10 @@ namespace cell::gateway {
 struct ServoSnapshot {
   JointState measured;
   JointSetpoint setpoint;
+  /// What the controller's loop followed this cycle (RobotState.setpoint_rad_or_mm): the
+  /// driver's applied setpoint where it changed the host's (RobotDriver::applied_setpoint),
+  /// else setpoint.q.
+  JointVector commanded;
   Eigen::Isometry3d base_T_tool = Eigen::Isometry3d::Identity();  ///< FK of measured joints
   cell_robot_RobotMode mode = cell_robot_MODE_IDLE;
   bool moving = false;
@@ -119,6 +123,7 @@ class Servo {
   // Servo-thread state.
   JointState measured_;
   JointSetpoint setpoint_;
+  JointVector applied_;  ///< the driver's applied setpoint this cycle (ServoSnapshot::commanded)
   trajectory::JointSample sample_;
   std::vector<motion::GripperEvent> events_;
   std::size_t next_event_ = 0;

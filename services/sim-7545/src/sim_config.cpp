@@ -31,6 +31,7 @@ Result<SimConfig> load_config(const config::Document& doc) {
   root.optional("realtime_priority", c.realtime_priority);
   root.optional("idle_poll_us", c.idle_poll_us);
   root.optional("delay_s", c.delay_s);
+  root.optional("deadline_slack_us", c.deadline_slack_us);
   root.optional("initial_joints", c.initial_joints);
   const auto joints = root.sequence("joints", false);
   if (!joints.empty() && joints.size() != dpr7545::kJoints) {
@@ -89,6 +90,11 @@ Result<SimConfig> load_config(const config::Document& doc) {
   }
   if (!(c.delay_s >= 0 && c.delay_s <= 10)) {
     root.fail("delay_s", fmt::format("must be in [0, 10], got {}", c.delay_s));
+  }
+  if (!(c.deadline_slack_us >= 0 && c.deadline_slack_us <= 100'000)) {
+    root.fail("deadline_slack_us",
+              fmt::format("must be in [0, 100000] (0: the board's deadlines), got {}",
+                          c.deadline_slack_us));
   }
   for (double v : c.initial_joints) {
     if (!std::isfinite(v)) {

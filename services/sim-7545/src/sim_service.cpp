@@ -45,6 +45,7 @@ SlaveOptions slave_options(const SimConfig& config, const kinematics::RobotModel
   o.plants = config.plants;
   o.idle_poll_s = config.idle_poll_us * 1e-6;
   o.delay_s = config.delay_s;
+  o.deadline_slack_s = config.deadline_slack_us * 1e-6;
   o.fault_injection = config.fault_injection_enabled;
   o.deadline_miss_after_s = config.deadline_miss_after_s;
   for (int j = 0; j < dpr7545::kJoints; ++j) {
@@ -152,7 +153,7 @@ void SimService::publish(const SlaveSnapshot& s) {
                                               : s.sample_period_us) *
                      1e-6;
   m.cycle_jitter_max_us = s.late_max_us;
-  m.cycle_overruns = s.deadline_errors;
+  m.cycle_overruns = s.deadline_errors + s.late_served;
   (void)state_writer_.write(m);  // best-effort stream
 }
 

@@ -23,7 +23,8 @@ namespace cell::sim7545 {
 /// the DAC words as effort_raw, FK of the true joints, the gripper and lighting latches, the
 /// error register with its meaning, the slave's mode (IDLE, MOVING = control mode, HOMING),
 /// cycle_count = control periods, cycle_jitter_max_us = worst period-start lateness since the
-/// last state, cycle_overruns = deadline errors (0x1000/0x2000) the slave flagged. setpoint is
+/// last state, cycle_overruns = periods whose master was late past the board's deadline: the
+/// deadline errors (0x1000/0x2000) the slave flagged plus those deadline_slack_us covered. setpoint is
 /// empty: the slave has none. No input topics: faults are injected through the segment's
 /// mailbox (sim_control.hpp; `cell-sim-7545 inject ...`).
 class SimService {

@@ -24,7 +24,7 @@ TEST(SimConfig, TheShippedConfigLoads) {
 
 TEST(SimConfig, ErrorsNameTheKeyTheValueAndTheRule) {
   auto doc = config::load_string(
-      "robot_config: x.yaml\nshm_name: no-slash\ndelay_s: -1\n"
+      "robot_config: x.yaml\nshm_name: no-slash\ndelay_s: -1\ndeadline_slack_us: -5\n"
       "joints: [{viscous_per_s: 1}, {}, {}, {home_edge_counts: 5000}]\n"
       "fault_injection: {enabled: true, colour: red}\n",
       "sim.yaml");
@@ -34,6 +34,7 @@ TEST(SimConfig, ErrorsNameTheKeyTheValueAndTheRule) {
   EXPECT_THAT(c.error().message, HasSubstr("sim.yaml:2:11: key 'shm_name'"));
   EXPECT_THAT(c.error().message, HasSubstr("must start with '/'"));
   EXPECT_THAT(c.error().message, HasSubstr("key 'delay_s': must be in [0, 10], got -1"));
+  EXPECT_THAT(c.error().message, HasSubstr("key 'deadline_slack_us': must be in [0, 100000]"));
   EXPECT_THAT(c.error().message, HasSubstr("home_edge_counts"));
   EXPECT_THAT(c.error().message, HasSubstr("unknown key 'fault_injection.colour'"));
 }
