@@ -363,23 +363,34 @@ class Gateway7545Test : public ::testing::Test {
     return false;
   }
 
-  /// Waits until the arm rests on its setpoint (the bumpless start and the PD loop settled).
+  /// Waits until the arm rests on its setpoint (the bumpless start and the PD loop settled):
+  /// the joints within kRestCounts of the setpoint and the setpoint unchanged, over 100 ms of
+  /// states. The published setpoint is the loop's applied reference: at the first period of a
+  /// bumpless start it equals the measured joints, wherever they are, and then ramps to the
+  /// host's setpoint; one state agreeing with it says nothing about rest.
   void settle() {
+    std::vector<double> held;
+    auto since = std::chrono::steady_clock::now();
     ASSERT_TRUE(eventually(
         [&] {
           pump();
           (void)recover_from_spontaneous_deadline_miss();
-          if (!gateway_state_ || gateway_state_->q.size() != 4 ||
-              gateway_state_->setpoint.size() != 4) {
+          const auto now = std::chrono::steady_clock::now();
+          bool rests = gateway_state_ && gateway_state_->q.size() == 4 &&
+                       gateway_state_->setpoint.size() == 4 &&
+                       gateway_state_->mode != cell_robot_MODE_FAULT;
+          for (std::size_t j = 0; rests && j < 4; ++j) {
+            rests = std::abs(gateway_state_->q[j] - gateway_state_->setpoint[j]) * cpu(j) <=
+                        kRestCounts &&
+                    (held.size() != 4 ||
+                     std::abs(gateway_state_->setpoint[j] - held[j]) * cpu(j) <= 0.01);
+          }
+          if (!rests || held.size() != 4) {
+            held = gateway_state_ ? gateway_state_->setpoint : std::vector<double>{};
+            since = now;
             return false;
           }
-          for (std::size_t j = 0; j < 4; ++j) {
-            if (std::abs(gateway_state_->q[j] - gateway_state_->setpoint[j]) * cpu(j) >
-                kRestCounts) {
-              return false;
-            }
-          }
-          return true;
+          return now - since >= std::chrono::milliseconds(100);
         },
         20s))
         << "the arm did not settle on its setpoint";

@@ -715,6 +715,11 @@ bool Dpr7545Driver::applied_setpoint(JointVector& out) const noexcept {
   return true;
 }
 
+bool Dpr7545Driver::home_joints(JointVector& out) const {
+  out = JointVector::Zero(kJoints);  // find_home() zeroes every counter at its index pulse
+  return true;
+}
+
 Status Dpr7545Driver::begin_leave(Procedure next) noexcept {
   procedure_ = next;
   const bool in_control = phase_ == Phase::kControl || phase_ == Phase::kEngage;

@@ -129,6 +129,7 @@ class Dpr7545Driver final : public RobotDriver {
   CycleStatus read(Clock::time_point now, JointState& state) override;
   CycleStatus write(Clock::time_point now, const JointSetpoint& setpoint) override;
   bool applied_setpoint(JointVector& out) const noexcept override;
+  bool home_joints(JointVector& out) const override;
   Status command(DriverCommand command, const CommandArgs& args) override;
   bool supports(DriverCommand command) const noexcept override;
   std::string describe_faults(std::uint32_t bits) const override;

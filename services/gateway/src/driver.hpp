@@ -94,6 +94,14 @@ class RobotDriver {
   /// last write() made no exchange. Real-time safe (no allocation: `out` has fixed capacity).
   virtual bool applied_setpoint(JointVector& /*out*/) const noexcept { return false; }
 
+  /// Where a finished homing leaves the arm's reference, in the host's joint units: the 7545's
+  /// index-defined home (every counter 0), which its PD loop holds once control mode starts.
+  /// The host's setpoint becomes it, so the loop does not pull the arm back to the pre-homing
+  /// setpoint (which was read in counts the homing has since re-zeroed), nor hold a position
+  /// the arm only passed while it still coasted onto the index. False when the controller
+  /// holds the arm itself after homing (the setpoint is then left alone).
+  virtual bool home_joints(JointVector& /*out*/) const { return false; }
+
   /// Starts a non-cyclic command; progress shows in JointState (busy, homed, gripper).
   /// Errors: kNotReady when the controller cannot take it now (moving, faulted), with why.
   virtual Status command(DriverCommand command, const CommandArgs& args) = 0;

@@ -408,6 +408,12 @@ void Servo::cycle(Clock::time_point now) {
   if (mode_ == cell_robot_MODE_IDLE && measured_.busy && !measured_.homed) {
     mode_ = cell_robot_MODE_HOMING;
   } else if (mode_ == cell_robot_MODE_HOMING && !measured_.busy) {
+    // The homing re-zeroed the counters: the old setpoint is in a frame that no longer
+    // exists. Hold the home the controller defines (not the measured joints: the arm may
+    // still be coasting onto the index when the controller reports the homing done).
+    if (measured_.homed && driver_->home_joints(setpoint_.q)) {
+      setpoint_.qd = JointVector::Zero(setpoint_.q.size());
+    }
     mode_ = cell_robot_MODE_IDLE;
   }
 

@@ -156,6 +156,73 @@ TEST_F(ServoTest, IdealRobotRefusesUntilHomedThenFollowsExactly) {
   EXPECT_THAT(s.base_T_tool, ::cell::testing::IsNearPose(*model_.forward(plan->trajectory.end()), 1e-9));
 }
 
+/// A controller whose homing, like the 7545's find_home(), re-zeroes its counters and reports
+/// done while the arm still coasts a little past the index; its home is every joint at 0.
+class HomingDriver final : public RobotDriver {
+ public:
+  explicit HomingDriver(JointVector q0) : q_(std::move(q0)) { info_.dof = 4; }
+  Status on_configure() override { return ok_status(); }
+  Status on_activate() override { return ok_status(); }
+  void on_deactivate() noexcept override {}
+  void on_cleanup() noexcept override {}
+  CycleStatus read(Clock::time_point, JointState& s) override {
+    if (homing_reads_ > 0 && --homing_reads_ == 0) {
+      homed_ = true;
+      q_ = jv({0.002, -0.001, 0.3, 0.004});  // re-zeroed, still coasting onto the index
+    }
+    s.q = q_;
+    s.qd = JointVector::Zero(4);
+    s.effort = JointVector::Zero(4);
+    s.homed = homed_;
+    s.busy = homing_reads_ > 0;
+    return CycleStatus::kOk;
+  }
+  CycleStatus write(Clock::time_point, const JointSetpoint& sp) override {
+    last_written = sp.q;
+    return CycleStatus::kOk;
+  }
+  Status command(DriverCommand c, const CommandArgs&) override {
+    if (c == DriverCommand::kHome) {
+      homed_ = false;
+      homing_reads_ = 50;
+    }
+    return ok_status();
+  }
+  bool home_joints(JointVector& out) const override {
+    out = JointVector::Zero(4);
+    return true;
+  }
+  std::string describe_faults(std::uint32_t) const override { return "none"; }
+  const DriverInfo& info() const noexcept override { return info_; }
+
+  JointVector last_written;
+
+ private:
+  DriverInfo info_;
+  JointVector q_;
+  bool homed_ = false;
+  int homing_reads_ = 0;
+};
+
+// After homing, the host's setpoint is the controller's home: not the setpoint from before
+// (in counts the homing re-zeroed, so holding it would drive the arm off home by the
+// power-up offset) nor the joints measured at the end (the arm was still coasting).
+TEST_F(ServoTest, AfterHomingTheSetpointIsTheControllersHome) {
+  auto driver = std::make_unique<HomingDriver>(jv({deg(10), deg(-20), 50, deg(5)}));
+  HomingDriver* fake = driver.get();
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  EXPECT_TRUE(servo.snapshot().setpoint.q.isApprox(jv({deg(10), deg(-20), 50, deg(5)})));
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_HOME, {}), IsOk());
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.mode == cell_robot_MODE_HOMING; }, 0.1));
+  ASSERT_TRUE(run_until(
+      servo, [](const ServoSnapshot& s) { return s.measured.homed && s.mode == cell_robot_MODE_IDLE; },
+      1.0));
+  servo.cycle(now_ += 1ms);
+  EXPECT_TRUE(servo.snapshot().setpoint.q.isZero(0.0)) << servo.snapshot().setpoint.q.transpose();
+  EXPECT_TRUE(fake->last_written.isZero(0.0)) << fake->last_written.transpose();
+}
+
 TEST_F(ServoTest, RefusesATrajectoryThatDoesNotStartHere) {
   const JointVector q0 = jv({deg(45), deg(105), 0, 0});
   Servo servo(model_, std::make_unique<FakeDriver>(q0), deg(0.5), 0.5);
