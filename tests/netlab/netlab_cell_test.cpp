@@ -116,6 +116,17 @@ class ThreePcCellTest : public ::testing::Test {
         std::printf("---- %s logs in %s/%s/logs\n", h.name.c_str(), lab_.dir().c_str(),
                     h.name.c_str());
       }
+      // Once more after the logs, so that a log's tail (all a CI excerpt may keep) says why.
+      const ::testing::TestResult* result =
+          ::testing::UnitTest::GetInstance()->current_test_info()->result();
+      std::printf("---- this test's failures:\n");
+      for (int i = 0; i < result->total_part_count(); ++i) {
+        const ::testing::TestPartResult& part = result->GetTestPartResult(i);
+        if (part.failed()) {
+          std::printf("%s:%d: %.1500s\n", part.file_name() ? part.file_name() : "?",
+                      part.line_number(), part.message());
+        }
+      }
     }
   }
 
