@@ -566,7 +566,8 @@ int run(int argc, char** argv) {
       a.translation_mm = {g.poison(), g.maybe(0), g.maybe(0)};
       a.rotation_rad = {g.maybe(0), g.poison(), g.maybe(0)};
       a.velocity_mm_per_s = {g.poison(), g.poison(), g.poison()};
-      bytes += traj.size() + 72;
+      a.extrapolate_s = g.poison();
+      bytes += traj.size() + 80;
       return alter.write(lane, a);
     }, {}});
 

@@ -9,11 +9,13 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <random>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -125,12 +127,21 @@ class TaskCell : public ::testing::Test {
     return doc.contains("parts") ? doc["parts"] : json::array();
   }
 
+  /// Everything child `name` printed so far ("" when there is no such child).
+  std::string output_of(const std::string& name) {
+    process::Child* c = child(name);
+    if (c == nullptr) {
+      return {};
+    }
+    std::string& drained = drained_[name];
+    (void)c->read_available(drained);
+    return c->output() + drained;
+  }
+
   std::string logs() {
     std::string out;
-    for (auto& [name, c] : children_) {
-      std::string text;
-      (void)c.read_available(text);
-      out += "---- " + name + "\n" + c.output() + text;
+    for (auto& entry : children_) {
+      out += "---- " + entry.first + "\n" + output_of(entry.first);
     }
     return out;
   }
@@ -140,6 +151,7 @@ class TaskCell : public ::testing::Test {
   std::string dir_;
   std::vector<std::string> env_;
   std::vector<std::pair<std::string, process::Child>> children_;
+  std::map<std::string, std::string> drained_;  ///< output read by output_of, per child
 };
 
 namespace cal = ::cell::calibration;
@@ -364,20 +376,33 @@ class TaskCellTest : public TaskCell {
   }
 
   /// How many times sim-world attached a part to a gripper (every grasp that took a part).
-  std::size_t grasps_in_world_log() {
-    process::Child* world = child("sim-world");
-    if (world == nullptr) {
-      return 0;
+  std::size_t grasps_in_world_log() { return grasps_seen_by_the_world().taken.size(); }
+
+  /// Every closing of a gripper as sim-world saw it: for each part taken, and for each grasp
+  /// on nothing, the nearest grasp point seen from the tool (world frame, mm).
+  struct GraspsSeen {
+    std::vector<Eigen::Vector3d> taken;
+    std::vector<Eigen::Vector3d> missed;
+  };
+  GraspsSeen grasps_seen_by_the_world() {
+    const std::string all = output_of("sim-world");
+    GraspsSeen out;
+    std::istringstream lines(all);
+    for (std::string line; std::getline(lines, line);) {
+      const bool taken = line.find("event=attached") != std::string::npos;
+      const bool missed = line.find("code=world.pick_missed") != std::string::npos;
+      if (!taken && !missed) {
+        continue;
+      }
+      Eigen::Vector3d d = Eigen::Vector3d::Constant(std::nan(""));
+      const auto at = line.find("from the tool: ");
+      if (at != std::string::npos) {
+        (void)std::sscanf(line.c_str() + at, "from the tool: %lf, %lf, %lf", &d.x(), &d.y(),
+                          &d.z());
+      }
+      (taken ? out.taken : out.missed).push_back(d);
     }
-    std::string text;
-    (void)world->read_available(text);
-    const std::string all = world->output() + text;
-    std::size_t n = 0;
-    for (std::size_t at = all.find("event=attached"); at != std::string::npos;
-         at = all.find("event=attached", at + 1)) {
-      ++n;
-    }
-    return n;
+    return out;
   }
 };
 

@@ -19,6 +19,7 @@ void AlterState::begin_cycle() noexcept {
     effective_.rotation_rad = effective_.rotation_rad + pending_.rotation_rad;
     effective_.velocity_mm_s = pending_.velocity_mm_s;
     effective_.stamp_s = pending_.stamp_s;
+    effective_.horizon_s = pending_.horizon_s;
   } else {
     effective_ = pending_;
   }
@@ -28,7 +29,10 @@ void AlterState::begin_cycle() noexcept {
 
 AlterCorrection AlterState::effective_at(double now_s) const noexcept {
   AlterCorrection out = effective_;
-  const double dt = std::min(now_s - effective_.stamp_s, kExtrapolationHorizonS);
+  const double horizon = effective_.horizon_s > 0.0
+                             ? std::min(effective_.horizon_s, kExtrapolationHorizonS)
+                             : kExtrapolationHorizonS;
+  const double dt = std::min(now_s - effective_.stamp_s, horizon);
   out.translation_mm += effective_.velocity_mm_s * dt;
   out.stamp_s = now_s;
   return out;

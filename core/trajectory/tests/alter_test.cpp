@@ -103,6 +103,34 @@ TEST(AlterState, StopsExtrapolatingAfterTheHorizon) {
   EXPECT_NEAR(alter.effective_at(3.0).translation_mm.y(), -100.0 - 500 * h, 1e-9);
 }
 
+// A sender near a limit gives the time left to it: the rate stays whole (no lag while
+// following) and the extrapolation ends at the limit. Longer than the gateway's horizon, or 0:
+// the gateway's horizon.
+TEST(AlterState, TheSendersHorizonEndsTheExtrapolationAtItsLimit) {
+  const double h = AlterState::kExtrapolationHorizonS;
+  for (const double asked : {0.02, 0.0, 10 * h}) {
+    SCOPED_TRACE(asked);
+    AlterState alter;
+    AlterCorrection c = dy(-100, 1.0);
+    c.velocity_mm_s = Eigen::Vector3d(0, -2000, 0);
+    c.horizon_s = asked;
+    alter.submit(c);
+    alter.begin_cycle();
+    const double used = asked > 0 && asked < h ? asked : h;
+    EXPECT_NEAR(alter.effective_at(1.0 + 0.01).translation_mm.y(), -100.0 - 20.0, 1e-9);
+    EXPECT_NEAR(alter.effective_at(1.0 + used).translation_mm.y(), -100.0 - 2000 * used, 1e-9);
+    EXPECT_NEAR(alter.effective_at(5.0).translation_mm.y(), -100.0 - 2000 * used, 1e-9);
+  }
+  // Cumulative mode keeps the horizon of the correction last added.
+  AlterState cumulative({.cumulative = true, .world_frame = true});
+  AlterCorrection c = dy(-10, 1.0);
+  c.velocity_mm_s = Eigen::Vector3d(0, -1000, 0);
+  c.horizon_s = 0.01;
+  cumulative.submit(c);
+  cumulative.begin_cycle();
+  EXPECT_NEAR(cumulative.effective_at(2.0).translation_mm.y(), -10.0 - 10.0, 1e-9);
+}
+
 // At the end the robot rests at the planned destination plus the total correction (V+ ALTOFF).
 TEST(TrajectoryExecutor, RestsAtDestinationPlusTotalCorrection) {
   testing::Gantry g;

@@ -809,8 +809,10 @@ void World::capture(RobotSlot& robot, double age_s, std::vector<WorldEvent>& eve
   const double tool_yaw = yaw_of(tool.linear());
   std::ptrdiff_t best = -1;
   double best_distance = std::numeric_limits<double>::infinity();
+  Eigen::Vector3d best_offset = Eigen::Vector3d::Zero();  // grasp point - tool point
   const Part* nearest = nullptr;
   double nearest_distance = std::numeric_limits<double>::infinity();
+  Eigen::Vector3d nearest_offset = Eigen::Vector3d::Zero();  // grasp point - tool point
   double nearest_yaw_error = 0.0;
   for (std::size_t i = 0; i < parts_.size(); ++i) {
     const Part& part = parts_[i];
@@ -825,12 +827,14 @@ void World::capture(RobotSlot& robot, double age_s, std::vector<WorldEvent>& eve
     if (dist < nearest_distance) {
       nearest = &part;
       nearest_distance = dist;
+      nearest_offset = grasp.translation() - p;
       nearest_yaw_error = yaw_error;
     }
     if (dist <= options_.capture_tolerance_mm &&
         std::abs(yaw_error) <= options_.capture_yaw_tolerance && dist < best_distance) {
       best = static_cast<std::ptrdiff_t>(i);
       best_distance = dist;
+      best_offset = grasp.translation() - p;
     }
   }
   if (best < 0) {
@@ -844,10 +848,11 @@ void World::capture(RobotSlot& robot, double age_s, std::vector<WorldEvent>& eve
       e.part_id = nearest->id;
       e.detail = fmt::format(
           "gripper of '{}' closed at ({:.2f}, {:.2f}, {:.2f}) mm on nothing: the nearest grasp "
-          "point, of part '{}', is {:.2f} mm away (tolerance {:.2f} mm) and {:.1f} deg off in "
-          "yaw (tolerance {:.1f} deg)",
+          "point, of part '{}', is {:.2f} mm away (tolerance {:.2f} mm; from the tool: {:.2f}, "
+          "{:.2f}, {:.2f} mm in the world) and {:.1f} deg off in yaw (tolerance {:.1f} deg)",
           robot_id, p.x(), p.y(), p.z(), nearest->id, nearest_distance,
-          options_.capture_tolerance_mm, rad_to_deg(nearest_yaw_error),
+          options_.capture_tolerance_mm, nearest_offset.x(), nearest_offset.y(),
+          nearest_offset.z(), rad_to_deg(nearest_yaw_error),
           rad_to_deg(options_.capture_yaw_tolerance));
     }
     events.push_back(std::move(e));
@@ -865,8 +870,8 @@ void World::capture(RobotSlot& robot, double age_s, std::vector<WorldEvent>& eve
   e.support = part.support_name;
   e.detail = fmt::format(
       "gripper of '{}' took part '{}' from the {} ({:.2f} mm from its grasp "
-      "point)",
-      robot_id, part.id, from, best_distance);
+      "point; from the tool: {:.2f}, {:.2f}, {:.2f} mm in the world)",
+      robot_id, part.id, from, best_distance, best_offset.x(), best_offset.y(), best_offset.z());
   events.push_back(std::move(e));
 }
 

@@ -153,7 +153,11 @@ TEST(WorldPick, FiveMillimetresOffIsAMiss) {
     const auto missed = of_kind(events, WorldEvent::Kind::kMissed);
     ASSERT_EQ(missed.size(), 1U);
     EXPECT_EQ(missed[0].part_id, "ic");
-    EXPECT_THAT(missed[0].detail, HasSubstr("is 5.00 mm away (tolerance 2.00 mm)"));
+    EXPECT_THAT(missed[0].detail, HasSubstr("is 5.00 mm away (tolerance 2.00 mm;"));
+    // Which way the part was, from the tool: what a tracking lag or a calibration offset shows.
+    const Eigen::Vector3d to_part = Eigen::Vector3d::Zero() - offset;
+    EXPECT_THAT(missed[0].detail, HasSubstr(fmt::format("from the tool: {:.2f}, {:.2f}, {:.2f} mm",
+                                                        to_part.x(), to_part.y(), to_part.z())));
     EXPECT_EQ(w.find("ic")->support_name, "table");
     EXPECT_THAT(w.find("ic")->world_T_part, IsNearPose(part_before, 0.0));
     // Opening again releases nothing.
@@ -476,7 +480,7 @@ TEST(WorldBelt, ACaptureComparesTheToolWithThePartAtTheStatesInstant) {
     if (with_age) {
       const auto attached = of_kind(events, WorldEvent::Kind::kAttached);
       ASSERT_EQ(attached.size(), 1U);
-      EXPECT_THAT(attached[0].detail, HasSubstr("(0.00 mm from its grasp point)"));
+      EXPECT_THAT(attached[0].detail, HasSubstr("(0.00 mm from its grasp point;"));
       // Held as it was then: the next state, 1 ms later and 2 mm on, carries it exactly.
       ASSERT_THAT(w.update_robot("picker", base_T(w, "picker", Eigen::Translation3d(2, 0, 0) * tool),
                                  GripperState::kClosed, events, 0.0005),
@@ -486,7 +490,7 @@ TEST(WorldBelt, ACaptureComparesTheToolWithThePartAtTheStatesInstant) {
     } else {
       const auto missed = of_kind(events, WorldEvent::Kind::kMissed);
       ASSERT_EQ(missed.size(), 1U);
-      EXPECT_THAT(missed[0].detail, HasSubstr("is 3.00 mm away (tolerance 2.00 mm)"));
+      EXPECT_THAT(missed[0].detail, HasSubstr("is 3.00 mm away (tolerance 2.00 mm;"));
     }
   }
   World w = belt_world(parts, 2000.0);

@@ -247,9 +247,15 @@ void GatewayService::handle_alter(const cell_motion_AlterCorrection& message) {
   c.rotation_rad = {message.rotation_rad.x, message.rotation_rad.y, message.rotation_rad.z};
   c.velocity_mm_s = {message.velocity_mm_per_s.x, message.velocity_mm_per_s.y,
                      message.velocity_mm_per_s.z};
+  c.horizon_s = message.extrapolate_s;
   if (!c.translation_mm.allFinite() || !c.rotation_rad.allFinite() ||
-      !c.velocity_mm_s.allFinite()) {
+      !c.velocity_mm_s.allFinite() || !std::isfinite(c.horizon_s)) {
     log::warn("alter", "dropped a correction with non-finite values");
+    return;
+  }
+  if (c.horizon_s < 0.0) {
+    log::warn("alter", fmt::format("dropped a correction with a negative extrapolate_s ({} s)",
+                                   c.horizon_s));
     return;
   }
   // The correction holds at the wall-clock time it was stamped; the servo runs on the steady

@@ -364,7 +364,12 @@ void Servo::cycle(Clock::time_point now) {
     executor_.submit_alter(c);
   }
 
-  // Read the controller.
+  // Read the controller. RobotState's stamp is this instant (idl/robot.idl: when the joints
+  // were read), not the end of the cycle: at 2 m/s of tracking, a stamp 1 ms late puts the
+  // tool 2 mm behind where the state says it was.
+  const std::int64_t read_ns = wall_time_ns() - std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                                    Clock::now() - now)
+                                                    .count();
   const CycleStatus read_status = driver_->read(now, measured_);
   if (read_status == CycleStatus::kFault && mode_ != cell_robot_MODE_FAULT) {
     fault(measured_.fault_bits, driver_->describe_faults(measured_.fault_bits));
@@ -457,7 +462,7 @@ void Servo::cycle(Clock::time_point now) {
   snapshot_.progress = executor_.progress();
   snapshot_.tracking = tracking;
   snapshot_.cycle = cycle_;
-  snapshot_.stamp_ns = wall_time_ns();
+  snapshot_.stamp_ns = read_ns;
   snapshot_.jitter_max_us = jitter_max_us_;
   snapshot_.overruns = overruns_;
 }

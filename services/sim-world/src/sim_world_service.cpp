@@ -273,7 +273,9 @@ void SimWorldService::publish_events() {
         cell_world_PhotocellEvent m{};
         const std::string frame = "world";
         m.belt_id = bus::borrow(e.belt_id);
-        m.header.stamp_ns = wall_time_ns();
+        // The instant of the edge: the world time of its step, on the wall clock.
+        m.header.stamp_ns =
+            world_wall_ns_ - std::llround((world_.time_s() - e.time_s) * 1e9);
         m.header.frame_id = bus::borrow(frame);
         m.header.seq = ++photocell_seq_;
         m.blocked = e.blocked;
@@ -318,7 +320,7 @@ void SimWorldService::publish_events() {
 }
 
 void SimWorldService::publish_world_state() {
-  world::fill_world_state(world_, wall_time_ns(), ++state_seq_, state_wire_);
+  world::fill_world_state(world_, world_wall_ns_, ++state_seq_, state_wire_);
   state_wire_.message.world_seq = world_seq();
   if (auto s = state_writer_.write(state_wire_.message); !s) {
     log::warn("world_state", s.error().message);
@@ -329,7 +331,7 @@ void SimWorldService::publish_belts() {
   if (world_.belts().empty()) {
     return;
   }
-  world::fill_belts(world_, wall_time_ns(), ++belt_seq_, belt_wire_);
+  world::fill_belts(world_, world_wall_ns_, ++belt_seq_, belt_wire_);
   for (const auto& b : belt_wire_.belts) {
     if (auto s = belt_writer_.write(b); !s) {
       log::warn("belt_state", s.error().message);
@@ -352,6 +354,16 @@ void SimWorldService::run(service::Context& ctx) {
       std::max<std::uint64_t>(1, std::llround(config_.step_hz / config_.belt_state_hz));
   std::uint64_t ticks = 0;
   auto next = SteadyClock::now();
+  // Each step brings the world up to the instant `next` stood for; states, belt counts and
+  // photocell edges carry that instant on the wall clock, not the (later, and in a catch-up
+  // burst the same) instant they were computed: a count stamped 1 ms late is 2 mm of belt at
+  // 2 m/s to whoever extrapolates it (the camera's latch, ALTER).
+  const auto wall_of = [](SteadyClock::time_point steady) {
+    return wall_time_ns() -
+           std::chrono::duration_cast<std::chrono::nanoseconds>(SteadyClock::now() - steady)
+               .count();
+  };
+  world_wall_ns_ = wall_of(next);
   publish_world_state();
   for (;;) {
     const bus::Fired fired = waitset.wait_until(next);
@@ -365,7 +377,7 @@ void SimWorldService::run(service::Context& ctx) {
     int steps = 0;
     while (now >= next && steps < kMaxCatchUpSteps) {
       world_.step(dt_s, events_);
-      world_wall_ns_ = wall_time_ns();
+      world_wall_ns_ = wall_of(next);
       ++ticks;
       ++steps;
       next += period;

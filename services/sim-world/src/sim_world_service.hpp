@@ -68,8 +68,9 @@ class SimWorldService {
   std::uint64_t photocell_seq_ = 0;
   std::set<std::string> unknown_robots_;  // warned about once each
   std::uint64_t overruns_ = 0;
-  /// The wall clock at the world's last step: what world_.time_s() stands for, so that a
-  /// robot state (stamped when its joints were read) is compared with the parts at its instant.
+  /// The wall-clock instant world_.time_s() stands for (its last step's), so that a robot
+  /// state (stamped when its joints were read) is compared with the parts at its instant; the
+  /// stamp of every state, belt reading and photocell edge published.
   std::int64_t world_wall_ns_ = 0;
   /// A robot state older or newer than this is taken as of now (another clock, a bad stamp).
   static constexpr double kMaxStateAgeS = 0.1;

@@ -489,18 +489,24 @@ class ConveyorJob {
           const bool met = c.dot(belt.direction) > 0.0;
           part_met = part_met || met;
           // The rate only while following: held at the limit (or waiting), the gateway must
-          // not extrapolate the correction further. Near the limit, the rate is cut so that
-          // the gateway's extrapolation (up to its horizon past the stamp, whatever the link
-          // delays) ends at the limit, never past it (netlab, 50 ms + 5 % loss: a chased part
-          // drove the arm 32 mm past the limit and out of reach).
+          // not extrapolate the correction further. Near the limit, the extrapolation (at the
+          // belt's rate, whatever the link delays) may run only until the limit, never past
+          // it (netlab, 50 ms + 5 % loss: a chased part drove the arm 32 mm past the limit
+          // and out of reach). The rate itself stays the belt's: a cut rate makes the arm lag
+          // the part between corrections (5 mm at 2 m/s, a missed grasp).
           Eigen::Vector3d rate = Eigen::Vector3d::Zero();
+          double horizon_s = 0.0;  // the gateway's own
           if (met && !escaped) {
             const double room = spec_.downstream_mm - (s_meet + c.dot(belt.direction));
-            const double reach_mm = speed * trajectory::AlterState::kExtrapolationHorizonS;
-            rate = reach_mm > room ? v_belt * std::max(0.0, room / reach_mm) : v_belt;
+            rate = v_belt;
+            if (speed * trajectory::AlterState::kExtrapolationHorizonS > room) {
+              // At least 1 us: 0 would mean the gateway's horizon.
+              horizon_s = std::max(1e-6, room / speed);
+            }
           }
           (void)run_.links().alter(robot_id, trajectory_id, ++cycle,
-                                   met ? c : Eigen::Vector3d::Zero(), rate, latest->stamp_ns);
+                                   met ? c : Eigen::Vector3d::Zero(), rate, latest->stamp_ns,
+                                   horizon_s);
         }
       }
       pump_eye();

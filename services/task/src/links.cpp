@@ -430,7 +430,8 @@ std::optional<BeltReading> Links::belt(const std::string& belt_id) {
 
 Status Links::alter(const std::string& robot_id, const std::string& trajectory_id,
                     std::uint64_t cycle, const Eigen::Vector3d& translation_mm,
-                    const Eigen::Vector3d& velocity_mm_per_s, std::int64_t stamp_ns) {
+                    const Eigen::Vector3d& velocity_mm_per_s, std::int64_t stamp_ns,
+                    double extrapolate_s) {
   cell_motion_AlterCorrection c{};
   c.robot_id = bus::borrow(robot_id);
   c.header.stamp_ns = stamp_ns > 0 ? stamp_ns : wall_time_ns();
@@ -439,6 +440,7 @@ Status Links::alter(const std::string& robot_id, const std::string& trajectory_i
   c.translation_mm = {translation_mm.x(), translation_mm.y(), translation_mm.z()};
   c.rotation_rad = {0, 0, 0};
   c.velocity_mm_per_s = {velocity_mm_per_s.x(), velocity_mm_per_s.y(), velocity_mm_per_s.z()};
+  c.extrapolate_s = extrapolate_s;
   return alter_writer_.write(c);
 }
 

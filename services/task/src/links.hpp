@@ -211,10 +211,12 @@ class Links {
 
   /// Writes an ALTER correction (world/base frame translation and its rate) for the robot's
   /// running trajectory, valid at `stamp_ns` (wall clock; 0: now): the gateway extrapolates
-  /// it with its rate from then, so the age of a belt reading does not make the arm lag.
+  /// it with its rate from then, so the age of a belt reading does not make the arm lag, for
+  /// at most `extrapolate_s` past the stamp (0: the gateway's horizon).
   Status alter(const std::string& robot_id, const std::string& trajectory_id,
                std::uint64_t cycle, const Eigen::Vector3d& translation_mm,
-               const Eigen::Vector3d& velocity_mm_per_s, std::int64_t stamp_ns = 0);
+               const Eigen::Vector3d& velocity_mm_per_s, std::int64_t stamp_ns = 0,
+               double extrapolate_s = 0.0);
 
   /// Sends a robot command (gripper, alter-off, stop) and waits for the gateway's answer.
   Status command(const std::string& robot_id, cell_robot_RobotCommandKind kind,

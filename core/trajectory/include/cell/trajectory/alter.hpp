@@ -24,6 +24,10 @@ struct AlterCorrection {
   Eigen::Vector3d rotation_rad = Eigen::Vector3d::Zero();
   Eigen::Vector3d velocity_mm_s = Eigen::Vector3d::Zero();  ///< d(translation)/dt
   double stamp_s = 0.0;  ///< time (executor clock) the values hold at
+  /// How far past stamp_s the rate may carry it [s]: 0 (or more than
+  /// AlterState::kExtrapolationHorizonS) means that horizon. A sender that knows a limit
+  /// ahead (the belt window's end) sends the time left to it.
+  double horizon_s = 0.0;
 };
 
 /// The executor's side of ALTER for one move. Corrections arrive at any rate; the executor
@@ -50,7 +54,7 @@ class AlterState {
   static constexpr double kExtrapolationHorizonS = 0.15;
 
   /// The effective correction extrapolated to `now_s` with its rate (translation only), for at
-  /// most kExtrapolationHorizonS past its stamp.
+  /// most its horizon_s (kExtrapolationHorizonS at the most) past its stamp.
   AlterCorrection effective_at(double now_s) const noexcept;
 
   /// Applies `correction` to a nominal pose: in the world frame C * base_T_tool (rotation about
