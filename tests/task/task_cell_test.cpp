@@ -4,7 +4,8 @@
 //  - Table: 15 ICs scattered by the simulator in the camera window, the 7545's camera
 //    calibrated from scratch by cell-calibration (board images, then the guided hand-eye), the
 //    thesis's job submitted: every IC in its slot within 0.5 mm and 1 degree.
-//  - Conveyor: a stream of DIPs on belt1 at 0.5 m/s for 60 s (2 m/s: bench/task, not met yet).
+//  - Conveyor: a stream of DIPs on belt1 at 0.5 m/s and at 2 m/s for 60 s: at least 99 % and
+//    95 % picked by the truth, the misses counted by cause, every grasp on its part.
 //  - Faults: cell-task killed (SIGKILL) 20 times during a table job; bad requests refused.
 #include <csignal>
 #include <random>
@@ -162,20 +163,24 @@ class ConveyorCellTest : public TaskCellTest {
   }
 };
 
+// The bounds. The test runs alone (RUN_SERIAL): on this 2-core machine both runs pick
+// every part (19 of 19 and 20 of 20, every grasp within 0.17 mm of its grasp point by the
+// truth); with two CPU hogs beside them they fall to about half, the misses still counted.
 TEST_F(ConveyorCellTest, StreamAtHalfAMetrePerSecondIsPickedAndTheMissesAddUp) {
   // A part every 3 s: the picker's cycle is about 1.9 s (track, grip, depart, place, back to
   // its ready pose); bench/task measures it at a part every 2 and 1.2 s as well.
   const BeltOutcome o = run_stream(500.0, "conveyor_ics.yaml", "belt-05");
-  // Of the parts the vision service recognised: on an idle machine every one is picked (19 of
-  // 19, the 99%); the bound here, at most 3 of about 19 missed, leaves room for a
-  // loaded 2-core machine, where the arm's tracking lags (12 of 17 with a build beside it).
-  EXPECT_LE(o.causes - o.locate_failed + (o.picked - o.in_bin), 3);
-  EXPECT_GE(picked_fraction(o), 0.75);
+  EXPECT_GE(picked_fraction(o), 0.99);
+  EXPECT_EQ(o.grasps_missed, 0);
 }
 
 TEST_F(ConveyorCellTest, StreamAtTwoMetresPerSecondIsPickedAndTheMissesAddUp) {
+  // config/jobs/conveyor_ics_fast.yaml: the arm waits low and downstream; each part is met
+  // where the motion service finds the arm can first be (a joint move, the grasp style that
+  // needs the least roll).
   const BeltOutcome o = run_stream(2000.0, "conveyor_ics_fast.yaml", "belt-2");
   EXPECT_GE(picked_fraction(o), 0.95);
+  EXPECT_LE(o.grasps_missed, 1);
 }
 
 TEST_F(TaskCellTest, KilledTwentyTimesTheTableJobStillPlacesEveryPartOnce) {

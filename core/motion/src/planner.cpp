@@ -244,8 +244,10 @@ Result<Plan> Planner::pick_or_place(const trajectory::JointVector& q0,
 }
 
 Result<Plan> Planner::track(const trajectory::JointVector& q0, const Eigen::Isometry3d& target,
-                            bool cumulative, bool world_frame, double speed_scale) const {
-  auto plan = move_linear(q0, target, speed_scale);
+                            bool cumulative, bool world_frame, double speed_scale,
+                            bool joint_interpolated) const {
+  auto plan = joint_interpolated ? move_pose(q0, target, "", speed_scale)
+                                 : move_linear(q0, target, speed_scale);
   if (!plan) {
     return plan;
   }
@@ -253,6 +255,103 @@ Result<Plan> Planner::track(const trajectory::JointVector& q0, const Eigen::Isom
   plan->alter_cumulative = cumulative;
   plan->alter_world_frame = world_frame;
   return plan;
+}
+
+Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
+                                     const MovingTarget& target, bool cumulative,
+                                     bool world_frame, double speed_scale) const {
+  CELL_TRY(check_scale(speed_scale));
+  const double speed = target.velocity_mm_s.norm();
+  if (!std::isfinite(speed) || speed <= 0.0) {
+    return Error{Errc::kInvalidArgument,
+                 "intercept: the target's velocity must be finite and non-zero"};
+  }
+  if (!std::isfinite(target.start_s) || target.start_s < 0 || !std::isfinite(target.margin_s) ||
+      target.margin_s < 0 || !std::isfinite(target.min_travel_mm) ||
+      !std::isfinite(target.max_travel_mm)) {
+    return Error{Errc::kInvalidArgument,
+                 "intercept: start, margin and travels must be finite, start and margin >= 0"};
+  }
+  if (!target.at_stamp.matrix().allFinite()) {
+    return Error{Errc::kInvalidArgument, "intercept: the target's pose is not finite"};
+  }
+  constexpr double kHorizonS = 5.0;  // a meeting further off than this is not worth planning
+  // Meeting times [s from the stamp]: never before the robot could be there at all.
+  const double t_first = std::max(target.start_s + target.margin_s, target.min_travel_mm / speed);
+  const double t_last = target.max_travel_mm > 0.0 ? target.max_travel_mm / speed
+                                                   : target.start_s + kHorizonS;
+  if (t_last < t_first) {
+    return Error{Errc::kOutOfRange,
+                 fmt::format("the target leaves the window ({:.0f} mm along its path) before the "
+                             "robot can start ({:.0f} mm along it)",
+                             target.max_travel_mm, speed * t_first)};
+  }
+  Intercept best;
+  std::string last_failure;              // the last meeting point the robot cannot reach
+  double late_s = -1.0;                  // how late at the last one it reaches (-1: none)
+  double late_travel_mm = 0.0;
+  // Plans the meeting at time t; true when the robot is there in time.
+  auto meet_at = [&](double t, Intercept& out) {
+    ++best.candidates;
+    Eigen::Isometry3d pose = target.at_stamp;
+    pose.pretranslate(target.velocity_mm_s * t);
+    auto plan = track(q0, pose, cumulative, world_frame, speed_scale, target.joint_interpolated);
+    if (!plan) {
+      last_failure = plan.error().message;
+      return false;
+    }
+    const double arrive_s = target.start_s + plan->trajectory.duration_s();
+    if (arrive_s + target.margin_s > t) {
+      late_s = arrive_s + target.margin_s - t;
+      late_travel_mm = speed * t;
+      return false;
+    }
+    out.plan = std::move(*plan);
+    out.meet = pose;
+    out.meet_s = t;
+    out.travel_mm = speed * t;
+    return true;
+  };
+  const double step_s = 10.0 / speed;  // 10 mm of the target's travel
+  double before = -1.0;                // the last time that could not be met
+  for (double t = t_first;; t += step_s) {
+    const bool last = t >= t_last;
+    t = std::min(t, t_last);
+    Intercept found;
+    if (meet_at(t, found)) {
+      // The earliest meeting lies in (before, t]: halve it down to 0.2 mm of travel.
+      double lo = before;
+      double hi = t;
+      while (lo >= 0.0 && (hi - lo) * speed > 0.2) {
+        const double mid = 0.5 * (lo + hi);
+        Intercept earlier;
+        if (meet_at(mid, earlier)) {
+          hi = mid;
+          found = std::move(earlier);
+        } else {
+          lo = mid;
+        }
+      }
+      found.candidates = best.candidates;
+      return found;
+    }
+    before = t;
+    if (last) {
+      break;
+    }
+  }
+  const std::string window = fmt::format(
+      "cannot meet the target at {:.0f} mm/s within its window ({:.0f} to {:.0f} mm along its "
+      "path)",
+      speed, speed * t_first, speed * t_last);
+  if (late_s >= 0.0) {
+    return Error{Errc::kOutOfRange,
+                 fmt::format("{}: at {:.0f} mm, the last point the robot reaches, it would be "
+                             "{:.0f} ms late{}",
+                             window, late_travel_mm, late_s * 1e3,
+                             last_failure.empty() ? "" : "; beyond: " + last_failure)};
+  }
+  return Error{Errc::kOutOfRange, fmt::format("{}: {}", window, last_failure)};
 }
 
 }  // namespace cell::motion

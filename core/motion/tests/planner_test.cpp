@@ -1,5 +1,6 @@
 #include "cell/motion/planner.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -214,6 +215,123 @@ TEST(PickerTracking, ToolOnThePartAtHalfAndTwoMetresPerSecond) {
   EXPECT_LT(picker_tracking_error(500, 0.016), 0.1);
   EXPECT_LT(picker_tracking_error(2000, 0.004), 0.1);
   EXPECT_LT(picker_tracking_error(2000, 0.016), 0.1);
+}
+
+// The conveyor picker waiting 25 mm above belt1 (x = 350 mm, surface z = -200), downstream
+// of the camera; a DIP (top 3.81 mm) exposed at y = 243 mm rides the belt along -y.
+struct BeltCase {
+  Planner planner{robot("scara_picker"),
+                  PlannerOptions{.linear = {.max_speed_mm_s = 2000,
+                                            .max_accel_mm_s2 = 10000,
+                                            .max_angular_speed_rad_s = deg(720),
+                                            .max_angular_accel_rad_s2 = deg(3600)}}};
+  trajectory::JointVector ready;
+  BeltCase(double ready_y_mm, double ready_yaw) {
+    auto q = planner.model().inverse(scara_pose(350, ready_y_mm, -175, ready_yaw),
+                                     trajectory::JointVector::Zero(4));
+    EXPECT_TRUE(q);
+    ready = *q;
+  }
+  MovingTarget part(double speed_mm_s, double dx_mm, double yaw) const {
+    MovingTarget t;
+    t.at_stamp = scara_pose(350 + dx_mm, 243, -196.19, yaw);
+    t.velocity_mm_s = Eigen::Vector3d(0, -speed_mm_s, 0);
+    t.start_s = 0.02;
+    t.margin_s = 0.02;
+    t.max_travel_mm = 243 + 457;  // the window ends at y = -457 mm
+    return t;
+  }
+  /// The robot reaches the point the target is at `t` s after its stamp in time.
+  bool in_time(const MovingTarget& target, double t) const {
+    Eigen::Isometry3d pose = target.at_stamp;
+    pose.pretranslate(target.velocity_mm_s * t);
+    auto plan = planner.track(ready, pose, false, true, 1.0, target.joint_interpolated);
+    return plan && target.start_s + plan->trajectory.duration_s() + target.margin_s <= t;
+  }
+};
+
+// Intercept: the earliest meeting point the robot reaches in time, on the target's path.
+TEST(PlannerIntercept, MeetsABeltPartAtTheEarliestPointItCanReachInTime) {
+  const BeltCase cell(-250, 0.0);
+  for (const double speed : {500.0, 2000.0}) {
+    for (const bool joint : {false, true}) {
+      for (const double yaw : {0.0, deg(40), deg(-45)}) {
+        SCOPED_TRACE(::testing::Message() << speed << " mm/s, joint " << joint << ", yaw " << yaw);
+        MovingTarget target = cell.part(speed, 25, yaw);
+        target.joint_interpolated = joint;
+        const auto began = std::chrono::steady_clock::now();
+        auto meet = cell.planner.intercept(cell.ready, target, false, true, 1.0);
+        const double ms = std::chrono::duration<double, std::milli>(
+                              std::chrono::steady_clock::now() - began)
+                              .count();
+        ASSERT_THAT(meet, IsOk());
+        EXPECT_TRUE(meet->plan.alter_enabled);
+        // On the path, at its time, reached in time, inside the window.
+        EXPECT_NEAR(meet->travel_mm, speed * meet->meet_s, 1e-9);
+        EXPECT_LT((meet->meet.translation() - (target.at_stamp.translation() +
+                                               target.velocity_mm_s * meet->meet_s))
+                      .norm(),
+                  1e-9);
+        EXPECT_LE(target.start_s + meet->plan.trajectory.duration_s() + target.margin_s,
+                  meet->meet_s + 1e-9);
+        EXPECT_LE(meet->travel_mm, target.max_travel_mm);
+        auto end = cell.planner.model().forward(meet->plan.trajectory.end());
+        ASSERT_TRUE(end);
+        EXPECT_LT((end->translation() - meet->meet.translation()).norm(), 1e-6);
+        // The earliest: half a millimetre earlier on the path the robot would be late.
+        EXPECT_FALSE(cell.in_time(target, meet->meet_s - 0.5 / speed));
+        std::printf("%4.0f mm/s, %s, yaw %+5.1f deg: meets at y = %6.1f mm, %.3f s after the "
+                    "exposure; %d candidates, %.2f ms\n",
+                    speed, joint ? "joint" : "line ", yaw * 180 / std::numbers::pi,
+                    meet->meet.translation().y(), meet->meet_s, meet->candidates, ms);
+      }
+    }
+  }
+}
+
+TEST(PlannerIntercept, AJointMoveMeetsTheFastBeltEarlierThanAStraightLine) {
+  const BeltCase cell(-250, 0.0);
+  MovingTarget target = cell.part(2000, 25, deg(40));
+  auto line = cell.planner.intercept(cell.ready, target, false, true, 1.0);
+  target.joint_interpolated = true;
+  auto joint = cell.planner.intercept(cell.ready, target, false, true, 1.0);
+  ASSERT_THAT(line, IsOk());
+  ASSERT_THAT(joint, IsOk());
+  EXPECT_LT(joint->meet_s, line->meet_s);
+}
+
+TEST(PlannerIntercept, RefusesWhenTheTargetLeavesTheWindowFirstAndSaysHowLate) {
+  const BeltCase cell(-250, 0.0);
+  MovingTarget target = cell.part(2000, 25, deg(80));
+  target.max_travel_mm = 243 + 250;  // ends where the robot waits
+  auto meet = cell.planner.intercept(cell.ready, target, false, true, 1.0);
+  EXPECT_THAT(meet, IsErrWith(Errc::kOutOfRange, "ms late"));
+  EXPECT_THAT(meet, IsErrWith(Errc::kOutOfRange, "cannot meet the target at 2000 mm/s"));
+  // A window that ends before the robot can even start.
+  target.max_travel_mm = 10;
+  EXPECT_THAT(cell.planner.intercept(cell.ready, target, false, true, 1.0),
+              IsErrWith(Errc::kOutOfRange, "before the robot can start"));
+  // Past the reach (600 mm from J1): the planning failure is the reason.
+  target = cell.part(2000, 25, 0.0);
+  target.min_travel_mm = 243 + 520;
+  target.max_travel_mm = 243 + 560;
+  EXPECT_THAT(cell.planner.intercept(cell.ready, target, false, true, 1.0),
+              IsErrWith(Errc::kOutOfRange, "cannot meet the target"));
+}
+
+TEST(PlannerIntercept, RefusesAStillOrNonFiniteTarget) {
+  const BeltCase cell(-250, 0.0);
+  MovingTarget target = cell.part(0.0, 0, 0.0);
+  EXPECT_THAT(cell.planner.intercept(cell.ready, target, false, true, 1.0),
+              IsErrWith(Errc::kInvalidArgument, "non-zero"));
+  target = cell.part(2000, 0, 0.0);
+  target.margin_s = std::nan("");
+  EXPECT_THAT(cell.planner.intercept(cell.ready, target, false, true, 1.0),
+              IsErrWith(Errc::kInvalidArgument, "finite"));
+  target = cell.part(2000, 0, 0.0);
+  target.at_stamp.translation().x() = INFINITY;
+  EXPECT_THAT(cell.planner.intercept(cell.ready, target, false, true, 1.0),
+              IsErrWith(Errc::kInvalidArgument, "not finite"));
 }
 
 }  // namespace

@@ -196,6 +196,13 @@ ConveyorPickSpec read_conveyor(config::MapReader& r) {
   read_optional_height(r, "place_z_mm", s.place_z_mm);
   r.optional("dwell_s", s.dwell_s);
   r.optional("alter_period_s", s.alter_period_s);
+  std::string track = "joint";
+  r.optional("track_motion", track);
+  if (track == "joint" || track == "line") {
+    s.track_joint_interpolated = track == "joint";
+  } else {
+    r.fail("track_motion", fmt::format("must be joint or line, got '{}'", track));
+  }
   if (r.has("ready_mm")) {
     std::vector<double> xy;
     r.optional("ready_mm", xy);

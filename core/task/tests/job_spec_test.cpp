@@ -190,6 +190,15 @@ TEST(JobSpec, LightsAndTheReadyPoseAreReadAndChecked) {
   std::string bad = belt;
   bad.replace(at, 19, "ready_mm: [350]");
   EXPECT_FALSE(parse_job_spec(bad, "belt.yaml", cell.robots()));
+  // How the arm goes to meet a part: a joint move unless the job says line.
+  EXPECT_TRUE(conveyor->conveyor()->track_joint_interpolated);
+  auto line = parse_job_spec(belt + "track_motion: line\n", "belt.yaml", cell.robots());
+  ASSERT_THAT(line, IsOk());
+  EXPECT_FALSE(line->conveyor()->track_joint_interpolated);
+  auto wobble = parse_job_spec(belt + "track_motion: wobble\n", "belt.yaml", cell.robots());
+  ASSERT_FALSE(wobble);
+  EXPECT_THAT(wobble.error().message, HasSubstr("track_motion"));
+  EXPECT_THAT(wobble.error().message, HasSubstr("must be joint or line, got 'wobble'"));
 }
 
 TEST(JobSpec, AnUnknownRobotOrKindIsNamed) {

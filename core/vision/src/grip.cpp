@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <numbers>
 
 namespace cell::vision {
 
@@ -140,15 +141,22 @@ GripResult test_clear_grip(const GraspModel& model,
       }
     }
     if (clear) {
-      result.verdict = GripVerdict::kClear;
-      result.style = static_cast<int>(k);
-      result.style_name = style.name;
-      result.detail = detail;
-      return result;
+      if (result.clear.empty()) {
+        result.verdict = GripVerdict::kClear;
+        result.style = static_cast<int>(k);
+        result.style_name = style.name;
+        result.detail = detail;  // only the styles before the first clear one
+      }
+      // The fingers close along the tool's y axis and x_g joins them: tool x at grasp.angle -
+      // pi/2 (ClearGrasp, grip.hpp).
+      result.clear.push_back(ClearGrasp{static_cast<int>(k), style.name, f.grasp,
+                                        f.grasp_angle_rad - std::numbers::pi / 2.0});
     }
   }
-  result.verdict = GripVerdict::kBlocked;
-  result.detail = detail.empty() ? "no grasp style" : detail;
+  if (result.clear.empty()) {
+    result.verdict = GripVerdict::kBlocked;
+    result.detail = detail.empty() ? "no grasp style" : detail;
+  }
   return result;
 }
 

@@ -1650,6 +1650,16 @@ void Locator::Impl::test_grips(LocateResult& result, const std::vector<int>& own
       return wc;
     };
     d.grip = test_clear_grip(*model, d.center_plane, d.angle_plane_rad, to_px, count);
+    // The clear grasps in the base frame, through the same mapping as the part's base_pose
+    // (to_detection), but not folded: the tool's yaw is the picker's to fold.
+    d.base_grasps.clear();
+    if (d.has_base_pose && mapper->world()) {
+      for (const ClearGrasp& g : d.grip.clear) {
+        if (auto base = mapper->to_base(g.grasp, g.tool_yaw_rad)) {
+          d.base_grasps.push_back(BaseGrasp{g.style, g.name, *base});
+        }
+      }
+    }
   }
 }
 

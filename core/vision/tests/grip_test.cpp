@@ -106,6 +106,89 @@ TEST(Fingerprints, TheFirstClearStyleWinsAndTheOthersSayWhy) {
   EXPECT_THAT(r.detail, HasSubstr("style 1 'second'"));
 }
 
+// Every clear style is listed, in style order, with G and the tool's yaw (fingers close along
+// the tool's y axis: yaw = grasp.angle - 90 deg). By hand, C = (200, 150), angle.aim = 30 deg:
+// "across" (rz.off 90) G = C, yaw 30; "ends" (rz.off 0) G = C, yaw 30 - 90 = -60;
+// "offset" (d.cg 5, alpha 0, rz.off 90) G = C - 5 (cos 30, sin 30) = (195.670, 147.500), yaw 30.
+TEST(Fingerprints, EveryClearStyleIsListedWithWhereTheToolGoes) {
+  GraspModel model;
+  model.class_name = "la";
+  model.finger_width_mm = 3.0;
+  model.finger_height_mm = 8.0;
+  model.area_tolerance_px = 5.0;
+  model.styles = {GraspStyle{"across", 0.0, 0.0, 90.0 * kDeg, 9.0},
+                  GraspStyle{"ends", 0.0, 0.0, 0.0, 21.0},
+                  GraspStyle{"offset", 5.0, 0.0, 90.0 * kDeg, 9.0}};
+  const auto identity = [](const Eigen::Vector2d& p) { return std::optional<Eigen::Vector2d>(p); };
+  const auto all_free = [](const std::array<Eigen::Vector2d, 4>&) {
+    return WindowCount{24.0, 24.0, true};
+  };
+  auto r = test_clear_grip(model, {200.0, 150.0}, 30.0 * kDeg, identity, all_free);
+  EXPECT_EQ(r.verdict, GripVerdict::kClear);
+  EXPECT_EQ(r.style, 0);
+  EXPECT_EQ(r.style_name, "across");
+  EXPECT_EQ(r.detail, "");
+  ASSERT_EQ(r.clear.size(), 3U);
+  EXPECT_EQ(r.clear[0].style, 0);
+  EXPECT_EQ(r.clear[0].name, "across");
+  EXPECT_NEAR(r.clear[0].grasp.x(), 200.0, 1e-12);
+  EXPECT_NEAR(r.clear[0].grasp.y(), 150.0, 1e-12);
+  EXPECT_NEAR(r.clear[0].tool_yaw_rad, 30.0 * kDeg, 1e-12);  // the part's major axis
+  EXPECT_EQ(r.clear[1].style, 1);
+  EXPECT_EQ(r.clear[1].name, "ends");
+  EXPECT_NEAR(r.clear[1].grasp.x(), 200.0, 1e-12);
+  EXPECT_NEAR(r.clear[1].grasp.y(), 150.0, 1e-12);
+  EXPECT_NEAR(r.clear[1].tool_yaw_rad, -60.0 * kDeg, 1e-12);  // the part's angle - 90 deg
+  EXPECT_EQ(r.clear[2].style, 2);
+  EXPECT_EQ(r.clear[2].name, "offset");
+  EXPECT_NEAR(r.clear[2].grasp.x(), 195.670, kTolMm);  // 5 mm from C along -MIA
+  EXPECT_NEAR(r.clear[2].grasp.y(), 147.500, kTolMm);
+  EXPECT_NEAR((r.clear[2].grasp - Eigen::Vector2d(200.0, 150.0)).norm(), 5.0, 1e-12);
+  EXPECT_NEAR(r.clear[2].tool_yaw_rad, 30.0 * kDeg, 1e-12);
+
+  // angle.aim 0: "across" windows at (200, 144) and (200, 156); "ends" at (188, 150) and
+  // (212, 150); "offset" (G = (195, 150)) at (195, 144) and (195, 156).
+  auto taken_if = [](auto taken) {
+    return [taken](const std::array<Eigen::Vector2d, 4>& w) {
+      const Eigen::Vector2d c = 0.25 * (w[0] + w[1] + w[2] + w[3]);
+      return WindowCount{taken(c) ? 12.0 : 24.0, 24.0, true};
+    };
+  };
+  // A part near x = 195: only "offset" blocked. The first clear is still "across" with no
+  // detail (a later style's failure is not explained), and "offset" is not listed.
+  r = test_clear_grip(model, {200.0, 150.0}, 0.0, identity,
+                      taken_if([](const Eigen::Vector2d& c) { return std::abs(c.x() - 195.0) < 2; }));
+  EXPECT_EQ(r.verdict, GripVerdict::kClear);
+  EXPECT_EQ(r.style, 0);
+  EXPECT_EQ(r.style_name, "across");
+  EXPECT_EQ(r.detail, "");
+  ASSERT_EQ(r.clear.size(), 2U);
+  EXPECT_EQ(r.clear[0].name, "across");
+  EXPECT_EQ(r.clear[1].name, "ends");
+  EXPECT_NEAR(r.clear[1].tool_yaw_rad, -90.0 * kDeg, 1e-12);
+  // A part at y > 155: "across" and "offset" blocked, only "ends" listed; the detail explains
+  // "across" only (the styles before the first clear one), as before.
+  r = test_clear_grip(model, {200.0, 150.0}, 0.0, identity,
+                      taken_if([](const Eigen::Vector2d& c) { return c.y() > 155.0; }));
+  EXPECT_EQ(r.verdict, GripVerdict::kClear);
+  EXPECT_EQ(r.style, 1);
+  EXPECT_EQ(r.style_name, "ends");
+  EXPECT_EQ(r.detail,
+            "style 0 'across': fingerprint 2 has 12 of 24 px taken by another part (tolerance 5)");
+  ASSERT_EQ(r.clear.size(), 1U);
+  EXPECT_EQ(r.clear[0].style, 1);
+  EXPECT_EQ(r.clear[0].name, "ends");
+  EXPECT_NEAR((r.clear[0].grasp - Eigen::Vector2d(200.0, 150.0)).norm(), 0.0, 1e-12);
+  EXPECT_NEAR(r.clear[0].tool_yaw_rad, -90.0 * kDeg, 1e-12);
+  // Everything taken: blocked, nothing listed, every style explained.
+  r = test_clear_grip(model, {200.0, 150.0}, 0.0, identity,
+                      taken_if([](const Eigen::Vector2d&) { return true; }));
+  EXPECT_EQ(r.verdict, GripVerdict::kBlocked);
+  EXPECT_EQ(r.style, -1);
+  EXPECT_TRUE(r.clear.empty());
+  EXPECT_THAT(r.detail, HasSubstr("style 2 'offset'"));
+}
+
 TEST(Fingerprints, AFingerOutsideTheImageFollowsTheViewingPolicy) {
   GraspModel model;
   model.class_name = "la";
@@ -212,6 +295,69 @@ TEST(ClearGrip, ANeighbourInsideOneFingerprintMovesTheGraspToTheNextStyle) {
     for (const Detection& d : result->detections) {
       if (d.class_name == "dip8") {
         EXPECT_EQ(d.grip.verdict, GripVerdict::kNotTested);
+      }
+    }
+  }
+}
+
+// Rendered and located: a lone dip14 lists both styles, in the plane frame and in the robot's
+// base frame; with a dip8 in the "across" fingerprint it lists only "ends". The base grasps go
+// through the same mapping as base_pose: "across" (d.cg 0, tool x along the part) has its x, y
+// and its yaw modulo 180 deg; "ends" is turned by -90 deg from it.
+TEST(ClearGrip, EveryClearStyleIsListedInTheBaseFrame) {
+  const Cell& cell = Cell::get();
+  LocateOptions options;
+  options.grasps = {dip14_model()};
+  auto locator = Locator::create(options);
+  ASSERT_TRUE(locator) << locator.error().message;
+  const Eigen::Vector2d c = cell.window(30.0).center();
+  const double yaw = 25.0 * kDeg;
+  const Eigen::Vector2d n1 = c + 9.5 * Eigen::Vector2d(-std::sin(yaw), std::cos(yaw));
+  const std::vector<std::vector<render::Part>> scenes = {
+      {cell.part("ic", "dip14", c.x(), c.y(), yaw, true)},
+      {cell.part("ic", "dip14", c.x(), c.y(), yaw, true),
+       cell.part("n1", "dip8", n1.x(), n1.y(), yaw, true)}};
+  const std::vector<std::vector<std::string>> expected = {{"across", "ends"}, {"ends"}};
+  for (std::size_t k = 0; k < scenes.size(); ++k) {
+    const auto frame = cell.render(fmt::format("clear grasps {}", k), scenes[k],
+                                   cell.aligned_joints(), Lights::kTubes, 40 + k);
+    const auto result =
+        locator->locate(frame.image, cell.mapper(cell.true_calibration(), frame.joints));
+    ASSERT_TRUE(result);
+    const Detection* ic = nullptr;
+    for (const Detection& d : result->detections) {
+      if (d.class_name == "dip14") {
+        ic = &d;
+      }
+    }
+    ASSERT_NE(ic, nullptr) << frame.name;
+    ASSERT_TRUE(ic->has_base_pose) << frame.name;
+    EXPECT_EQ(ic->grip.verdict, GripVerdict::kClear) << frame.name << ": " << ic->grip.detail;
+    EXPECT_EQ(ic->grip.style, k == 0 ? 0 : 1) << frame.name;
+    EXPECT_EQ(ic->grip.style_name, expected[k][0]) << frame.name;
+    ASSERT_EQ(ic->grip.clear.size(), expected[k].size()) << frame.name << ": " << ic->grip.detail;
+    ASSERT_EQ(ic->base_grasps.size(), expected[k].size()) << frame.name;
+    for (std::size_t i = 0; i < expected[k].size(); ++i) {
+      const ClearGrasp& g = ic->grip.clear[i];
+      const BaseGrasp& b = ic->base_grasps[i];
+      EXPECT_EQ(g.name, expected[k][i]) << frame.name;
+      EXPECT_EQ(b.name, g.name) << frame.name;
+      EXPECT_EQ(b.style, g.style) << frame.name;
+      EXPECT_EQ(g.style, g.name == "across" ? 0 : 1) << frame.name;
+      // d.cg 0: G is the centroid; the tool along the part ("across") or across it ("ends").
+      EXPECT_NEAR((g.grasp - ic->center_plane).norm(), 0.0, 1e-9) << frame.name;
+      const double turn = g.name == "across" ? 0.0 : -90.0 * kDeg;
+      EXPECT_NEAR(g.tool_yaw_rad, ic->angle_plane_rad + turn, 1e-12) << frame.name;
+      EXPECT_NEAR(b.tool.x_mm, ic->base_pose.x_mm, 1e-9) << frame.name;
+      EXPECT_NEAR(b.tool.y_mm, ic->base_pose.y_mm, 1e-9) << frame.name;
+      EXPECT_NEAR(angle_error(b.tool.rz_rad, ic->base_pose.rz_rad + turn, 2), 0.0, 1e-9)
+          << frame.name << ": " << b.name;
+    }
+    // The neighbour has no grasp model: nothing listed.
+    for (const Detection& d : result->detections) {
+      if (d.class_name == "dip8") {
+        EXPECT_TRUE(d.grip.clear.empty());
+        EXPECT_TRUE(d.base_grasps.empty());
       }
     }
   }

@@ -260,6 +260,15 @@ Status PartClass::validate() const {
   if (yaw_symmetry < 0 || yaw_symmetry > 64) {
     return invalid(name, fmt::format("yaw_symmetry must be 0..64, got {}", yaw_symmetry));
   }
+  if (grasp_yaws_rad.empty()) {
+    return invalid(name, "grasp_yaws_rad is empty: a part needs at least one grasp yaw");
+  }
+  for (std::size_t i = 0; i < grasp_yaws_rad.size(); ++i) {
+    if (!std::isfinite(grasp_yaws_rad[i])) {
+      return invalid(name,
+                     fmt::format("grasp_yaws_rad[{}] is not finite, got {}", i, grasp_yaws_rad[i]));
+    }
+  }
   if (shape == Shape::kDip) {
     const DipPackage& d = dip;
     if (d.pins < 4 || d.pins > 64 || d.pins % 2 != 0) {
@@ -344,6 +353,9 @@ PartClass make_dip(std::string name,
   c.reflectance = 0.1;  // black epoxy (digest 000 §3: black ICs on a white matte table)
   c.yaw_symmetry = 2;
   c.part_T_grasp = Eigen::Isometry3d(Eigen::Translation3d(0.0, 0.0, c.height_mm));
+  // A parallel-jaw gripper takes it across the body (fingers closing along y) or on its ends
+  // (along x): config/vision.yaml's "across" and "ends" grasps (digest 002 §3).
+  c.grasp_yaws_rad = {0.0, std::numbers::pi / 2.0};
   c.finalize();
   return c;
 }
@@ -380,6 +392,9 @@ PartClass make_prism(std::string name,
       c.yaw_symmetry = 2;
       break;
   }
+  // Symmetry 2 (a rectangle, an oblong box): taken across it or along it, as a DIP.
+  c.grasp_yaws_rad = c.yaw_symmetry == 2 ? std::vector<double>{0.0, std::numbers::pi / 2.0}
+                                         : std::vector<double>{0.0};
   c.part_T_grasp = Eigen::Isometry3d(Eigen::Translation3d(0.0, 0.0, height_mm));
   c.finalize();
   return c;

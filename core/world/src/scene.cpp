@@ -8,9 +8,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <numbers>
 #include <set>
 #include <sstream>
+#include <vector>
 
 #include "cell/config/yaml.hpp"
 #include "cell/geometry/angles.hpp"
@@ -68,8 +70,9 @@ void read_class(config::MapReader& r,
   r.required("shape", shape_text);
   r.optional("description", description);
   auto give_up = [&r]() {  // the other keys are not "unknown" on top of the real error
-    for (const char* key : {"length_mm", "width_mm", "height_mm", "reflectance", "pins",
-                            "row_spacing_mm", "yaw_symmetry", "grasp_xyz_mm", "mesh"}) {
+    for (const char* key :
+         {"length_mm", "width_mm", "height_mm", "reflectance", "pins", "row_spacing_mm",
+          "yaw_symmetry", "grasp_xyz_mm", "grasp_yaws_deg", "mesh"}) {
       (void)r.has(key);
     }
   };
@@ -137,6 +140,19 @@ void read_class(config::MapReader& r,
     std::array<double, 3> grasp{};
     r.required("grasp_xyz_mm", grasp);
     cls.part_T_grasp = Eigen::Isometry3d(Eigen::Translation3d(grasp[0], grasp[1], grasp[2]));
+  }
+  if (r.has("grasp_yaws_deg")) {
+    // Left as the NaN when the value is not a list of finite numbers (the reader said so).
+    std::vector<double> yaws_deg = {std::numeric_limits<double>::quiet_NaN()};
+    r.required("grasp_yaws_deg", yaws_deg);
+    if (yaws_deg.empty()) {
+      r.fail("grasp_yaws_deg", "must list at least one yaw [deg], e.g. [0, 90]");
+    } else if (std::isfinite(yaws_deg[0])) {
+      cls.grasp_yaws_rad.clear();
+      for (const double yaw_deg : yaws_deg) {
+        cls.grasp_yaws_rad.push_back(deg_to_rad(yaw_deg));
+      }
+    }
   }
   cls.finalize();
   if (auto s = cls.validate(); !s) {

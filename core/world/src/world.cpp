@@ -41,6 +41,19 @@ double fold(double angle, int symmetry) {
   return std::remainder(angle, 2.0 * std::numbers::pi / symmetry);
 }
 
+/// The tool's yaw error from the part's nearest grasp [rad]: over the class's grasp yaws g,
+/// the smallest fold(tool_yaw - (grasp_yaw + g), yaw_symmetry) in magnitude (signed).
+double grasp_yaw_error(double tool_yaw, double grasp_yaw, const PartClass& cls) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const double g : cls.grasp_yaws_rad) {
+    const double e = fold(tool_yaw - (grasp_yaw + g), cls.yaw_symmetry);
+    if (std::abs(e) < std::abs(best)) {
+      best = e;
+    }
+  }
+  return std::isfinite(best) ? best : fold(tool_yaw - grasp_yaw, cls.yaw_symmetry);
+}
+
 /// Uniform double in [a, b) from 53 random bits: the same sequence on every platform
 /// (std::uniform_real_distribution is implementation-defined).
 double uniform(std::mt19937_64& rng, double a, double b) {
@@ -823,7 +836,7 @@ void World::capture(RobotSlot& robot, double age_s, std::vector<WorldEvent>& eve
     const Eigen::Isometry3d grasp =
         Eigen::Translation3d(-age_s * support_velocity(part)) * part.world_T_grasp();
     const double dist = (grasp.translation() - p).norm();
-    const double yaw_error = fold(tool_yaw - yaw_of(grasp.linear()), part.cls->yaw_symmetry);
+    const double yaw_error = grasp_yaw_error(tool_yaw, yaw_of(grasp.linear()), *part.cls);
     if (dist < nearest_distance) {
       nearest = &part;
       nearest_distance = dist;

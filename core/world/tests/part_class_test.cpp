@@ -6,6 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
+#include <numbers>
+#include <vector>
 
 #include "cell/testing/matchers.hpp"
 #include "cell/world/footprint.hpp"
@@ -203,6 +206,42 @@ TEST(PartClass, InvalidClassesSayWhatIsWrong) {
               IsErrWith(Errc::kInvalidArgument, "defined twice"));
   EXPECT_EQ(cat.find("nothing"), nullptr);
   EXPECT_EQ(cat.list(), "plate");
+}
+
+// A parallel-jaw gripper takes an oblong part across it or along it (config/vision.yaml's
+// "across" and "ends" for DIPs); squares, discs, triangles and polyhedra at their one grasp.
+TEST(PartClass, BuiltInGraspYaws) {
+  const Catalogue cat = Catalogue::standard();
+  const std::vector<double> across_and_ends = {0.0, std::numbers::pi / 2.0};
+  const std::vector<double> across = {0.0};
+  for (const char* name : {"dip14", "dip40", "ic_7x30", "rectangle", "box"}) {
+    SCOPED_TRACE(name);
+    ASSERT_NE(cat.find(name), nullptr);
+    EXPECT_EQ(cat.find(name)->grasp_yaws_rad, across_and_ends);
+  }
+  for (const char* name : {"square", "disc", "triangle", "rapt_b1", "rapt_b3", "rapt_case"}) {
+    SCOPED_TRACE(name);
+    ASSERT_NE(cat.find(name), nullptr);
+    EXPECT_EQ(cat.find(name)->grasp_yaws_rad, across);
+  }
+  // A square box has 4-fold symmetry already; a rectangle of equal sides keeps both grasps.
+  EXPECT_EQ(make_prism("cube", Shape::kBox, 20, 20, 20, 0.5).grasp_yaws_rad, across);
+  EXPECT_EQ(make_prism("plate", Shape::kRectangle, 20, 20, 2, 0.5).grasp_yaws_rad, across_and_ends);
+  EXPECT_EQ(PartClass{}.grasp_yaws_rad, across);
+}
+
+TEST(PartClass, GraspYawsMustBeGivenAndFinite) {
+  PartClass none = make_dip("chip", 14, 19.05, 6.35, 7.62);
+  none.grasp_yaws_rad.clear();
+  EXPECT_THAT(none.validate(),
+              IsErrWith(Errc::kInvalidArgument, "part class 'chip': grasp_yaws_rad is empty"));
+  PartClass nan = make_prism("plate", Shape::kRectangle, 10, 5, 2, 0.5);
+  nan.grasp_yaws_rad = {0.0, std::numeric_limits<double>::quiet_NaN()};
+  EXPECT_THAT(nan.validate(), IsErrWith(Errc::kInvalidArgument,
+                                        "part class 'plate': grasp_yaws_rad[1] is not finite"));
+  Catalogue cat;
+  EXPECT_THAT(cat.add(none), IsErrWith(Errc::kInvalidArgument, "grasp_yaws_rad"));
+  EXPECT_EQ(cat.size(), 0U);
 }
 
 TEST(Shape, NamesRoundTrip) {

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <numbers>
+#include <vector>
 
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
@@ -203,6 +204,40 @@ TEST(Scene, BadClassesAreRefused) {
   EXPECT_THAT(scene.error().message, HasSubstr("scene.yaml:4:"));
   EXPECT_THAT(scene.error().message, HasSubstr("at least 4 vertices and 4 faces"));
   EXPECT_THAT(scene.error().message, Not(HasSubstr("unknown key")));
+}
+
+TEST(Scene, GraspYawsAreReadInDegrees) {
+  const auto scene = parse_scene(
+      "classes:\n"
+      "  - {name: chip, shape: dip, pins: 8, length_mm: 10, width_mm: 6.5, grasp_yaws_deg: [0]}\n"
+      "  - {name: tile, shape: square, length_mm: 10, height_mm: 2, grasp_yaws_deg: [0, 45]}\n"
+      "  - {name: plate, shape: rectangle, length_mm: 10, width_mm: 5, height_mm: 2}\n",
+      "scene.yaml", Catalogue::standard());
+  ASSERT_THAT(scene, IsOk());
+  ASSERT_EQ(scene->classes.size(), 3U);
+  EXPECT_EQ(scene->classes[0].grasp_yaws_rad, std::vector<double>{0.0});
+  ASSERT_EQ(scene->classes[1].grasp_yaws_rad.size(), 2U);
+  EXPECT_NEAR(scene->classes[1].grasp_yaws_rad[1], std::numbers::pi / 4.0, 1e-15);
+  EXPECT_EQ(scene->classes[2].grasp_yaws_rad, (std::vector<double>{0.0, std::numbers::pi / 2.0}));
+}
+
+TEST(Scene, BadGraspYawsAreRefusedNamingTheKey) {
+  const auto scene = parse_scene(
+      "classes:\n"
+      "  - {name: a, shape: dip, pins: 8, length_mm: 10, width_mm: 6.5, grasp_yaws_deg: []}\n"
+      "  - {name: b, shape: dip, pins: 8, length_mm: 10, width_mm: 6.5, grasp_yaws_deg: [0, x]}\n"
+      "  - {name: c, shape: dip, pins: 8, length_mm: 10, width_mm: 6.5, grasp_yaws_deg: 90}\n",
+      "scene.yaml", Catalogue::standard());
+  ASSERT_THAT(scene, IsErr(Errc::kConfig));
+  const std::string& m = scene.error().message;
+  EXPECT_THAT(m, HasSubstr("scene.yaml:2:"));
+  EXPECT_THAT(m, HasSubstr("key 'classes[0].grasp_yaws_deg': must list at least one yaw"));
+  EXPECT_THAT(m, HasSubstr("scene.yaml:3:"));
+  EXPECT_THAT(m, HasSubstr("key 'classes[1].grasp_yaws_deg[1]': expected a finite number"));
+  EXPECT_THAT(m, HasSubstr("scene.yaml:4:"));
+  EXPECT_THAT(m, HasSubstr("key 'classes[2].grasp_yaws_deg': expected a list"));
+  EXPECT_THAT(m, Not(HasSubstr("grasp_yaws_rad")));  // one error per bad key, not two
+  EXPECT_THAT(m, Not(HasSubstr("unknown key")));
 }
 
 TEST(Scene, AMissingFileOrBrokenYamlSaysWhere) {

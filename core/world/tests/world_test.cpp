@@ -190,6 +190,90 @@ TEST(WorldPick, TheYawAndTiltOfTheToolCount) {
               HasSubstr("30.0 deg from the vertical"));
 }
 
+/// The tool at the part's grasp point, turned by `yaw_deg` about the grasp z axis.
+Eigen::Isometry3d turned_grasp(const World& w, const std::string& part, double yaw_deg) {
+  return w.find(part)->world_T_grasp() *
+         Eigen::Isometry3d(Eigen::AngleAxisd(deg_to_rad(yaw_deg), Eigen::Vector3d::UnitZ()));
+}
+
+// A parallel-jaw gripper takes a DIP across its body (0 deg) or on its ends (+-90 deg: fingers
+// closing along the part's x), config/vision.yaml's "across" and "ends"; half-way is neither.
+TEST(WorldPick, ADipIsTakenAcrossItsBodyOrOnItsEnds) {
+  for (const double yaw_deg : {90.0, -90.0, 0.0, 180.0, 95.0}) {
+    SCOPED_TRACE(yaw_deg);
+    World w = table_world();
+    const auto events = close_at(w, "ibm7545", turned_grasp(w, "ic", yaw_deg));
+    const auto attached = of_kind(events, WorldEvent::Kind::kAttached);
+    ASSERT_EQ(attached.size(), 1U);
+    EXPECT_EQ(attached[0].part_id, "ic");
+    EXPECT_EQ(w.find("ic")->support_name, "robot/ibm7545");
+  }
+  World w = table_world();
+  const auto events = close_at(w, "ibm7545", turned_grasp(w, "ic", 45.0));
+  EXPECT_TRUE(of_kind(events, WorldEvent::Kind::kAttached).empty());
+  const auto missed = of_kind(events, WorldEvent::Kind::kMissed);
+  ASSERT_EQ(missed.size(), 1U);
+  EXPECT_EQ(missed[0].part_id, "ic");
+  EXPECT_THAT(missed[0].detail, HasSubstr("45.0 deg off in yaw (tolerance 10.0 deg)"));
+  EXPECT_THAT(missed[0].detail, HasSubstr("from the tool: 0.00, 0.00, 0.00 mm in the world"));
+  EXPECT_EQ(w.find("ic")->support_name, "table");
+  // 70 deg: 20 deg from the ends, the smaller error is reported.
+  World w2 = table_world();
+  const auto missed70 =
+      of_kind(close_at(w2, "ibm7545", turned_grasp(w2, "ic", 70.0)), WorldEvent::Kind::kMissed);
+  ASSERT_EQ(missed70.size(), 1U);
+  EXPECT_THAT(missed70[0].detail, HasSubstr("-20.0 deg off in yaw"));
+}
+
+TEST(WorldPick, AClassGraspedOnlyAcrossMissesOnItsEnds) {
+  const std::string scene =
+      "table: {height_mm: 750}\n"
+      "classes:\n"
+      "  - {name: across_only, shape: dip, pins: 14, length_mm: 19.05, width_mm: 6.35,\n"
+      "     grasp_yaws_deg: [0]}\n"
+      "parts:\n"
+      "  - {id: ic, class: across_only, x_mm: 100, y_mm: 480, yaw_deg: 30}\n";
+  World w = make_world(scene);
+  ASSERT_NE(w.find("ic"), nullptr);
+  const auto events = close_at(w, "ibm7545", turned_grasp(w, "ic", 90.0));
+  EXPECT_TRUE(of_kind(events, WorldEvent::Kind::kAttached).empty());
+  const auto missed = of_kind(events, WorldEvent::Kind::kMissed);
+  ASSERT_EQ(missed.size(), 1U);
+  EXPECT_THAT(missed[0].detail, HasSubstr("90.0 deg off in yaw"));
+  EXPECT_EQ(w.find("ic")->support_name, "table");
+  // Across, and half a turn from it: still taken.
+  for (const double yaw_deg : {0.0, 180.0}) {
+    SCOPED_TRACE(yaw_deg);
+    World w2 = make_world(scene);
+    EXPECT_EQ(of_kind(close_at(w2, "ibm7545", turned_grasp(w2, "ic", yaw_deg)),
+                      WorldEvent::Kind::kAttached)
+                  .size(),
+              1U);
+  }
+}
+
+// A square's 4-fold symmetry alone decides (its grasp yaws are {0}): 90 deg is taken, 45 is
+// the largest possible miss.
+TEST(WorldPick, ASquareKeepsItsFourFoldSymmetry) {
+  const std::string scene =
+      "table: {height_mm: 750}\n"
+      "parts:\n"
+      "  - {id: sq, class: square, x_mm: 100, y_mm: 480, yaw_deg: 10}\n";
+  for (const double yaw_deg : {0.0, 90.0, -90.0, 180.0, 8.0}) {
+    SCOPED_TRACE(yaw_deg);
+    World w = make_world(scene);
+    EXPECT_EQ(
+        of_kind(close_at(w, "ibm7545", turned_grasp(w, "sq", yaw_deg)), WorldEvent::Kind::kAttached)
+            .size(),
+        1U);
+  }
+  World w = make_world(scene);
+  const auto missed =
+      of_kind(close_at(w, "ibm7545", turned_grasp(w, "sq", 45.0)), WorldEvent::Kind::kMissed);
+  ASSERT_EQ(missed.size(), 1U);
+  EXPECT_THAT(missed[0].detail, HasSubstr("45.0 deg off in yaw"));
+}
+
 TEST(WorldPick, AHeldPartFollowsTheToolAndLandsWhereReleased) {
   World w = table_world();
   ASSERT_EQ(

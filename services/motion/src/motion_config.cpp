@@ -81,9 +81,16 @@ Result<MotionConfig> load_config(const config::Document& doc) {
   root.optional("state_timeout_s", c.state_timeout_s);
   root.optional("status_rate_hz", c.status_rate_hz);
   root.optional("keep_finished", c.keep_finished);
+  root.optional("track_start_latency_s", c.track_start_latency_s);
+  root.optional("max_target_age_s", c.max_target_age_s);
+  if (!(c.track_start_latency_s >= 0 && c.track_start_latency_s <= 1.0)) {
+    root.fail("track_start_latency_s",
+              fmt::format("must be in [0, 1] s, got {}", c.track_start_latency_s));
+  }
   for (const auto& [key, v] : {std::pair{"gateway_timeout_s", c.gateway_timeout_s},
                                std::pair{"state_timeout_s", c.state_timeout_s},
-                               std::pair{"status_rate_hz", c.status_rate_hz}}) {
+                               std::pair{"status_rate_hz", c.status_rate_hz},
+                               std::pair{"max_target_age_s", c.max_target_age_s}}) {
     if (!(v > 0)) {
       root.fail(key, fmt::format("must be > 0, got {}", v));
     }

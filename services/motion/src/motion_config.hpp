@@ -28,6 +28,8 @@ namespace cell::motion_service {
 ///   state_timeout_s: 1.0                     # robot state older than this: robot offline
 ///   status_rate_hz: 10                       # RUNNING progress updates
 ///   keep_finished: 200                       # finished motions kept on the status topic
+///   track_start_latency_s: 0.01              # a track's request to the robot moving
+///   max_target_age_s: 2.0                    # a moving target's stamp at most this old
 struct RobotEntry {
   std::string id;
   std::string config;  ///< resolved path
@@ -42,6 +44,11 @@ struct MotionConfig {
   double state_timeout_s = 1.0;
   double status_rate_hz = 10.0;
   int keep_finished = 200;
+  /// From a track's request to the robot moving (planning, the trajectory to the gateway,
+  /// its next cycle): a moving target is met as if the robot started this long after now.
+  double track_start_latency_s = 0.01;
+  /// A moving target's stamp this far from the clock is refused (stale, or clocks apart).
+  double max_target_age_s = 2.0;
 };
 
 Result<MotionConfig> load_config(const config::Document& doc);

@@ -120,7 +120,7 @@ void MotionService::publish(const std::string& motion_id, const cell_common_Requ
                             const std::string& robot_id, cell_motion_MotionState state,
                             const Error* error, double progress, double duration_s,
                             const std::vector<Eigen::Isometry3d>* path,
-                            const std::vector<double>* final_joints) {
+                            const std::vector<double>* final_joints, const Meeting* meeting) {
   const std::string code = error != nullptr ? std::string(to_string(error->code)) : "";
   const std::string reason = error != nullptr ? error->message : "";
   std::vector<cell_common_Pose> poses;
@@ -142,13 +142,18 @@ void MotionService::publish(const std::string& motion_id, const cell_common_Requ
   if (final_joints != nullptr) {
     bus::borrow(s.final_joints_rad_or_mm, *final_joints);
   }
+  s.meet_target = motion::to_idl(Eigen::Isometry3d::Identity());
+  if (meeting != nullptr) {
+    s.meet_target = motion::to_idl(meeting->pose);
+    s.meet_stamp_ns = meeting->stamp_ns;
+  }
   if (auto st = status_writer_.write(s); !st) {
     log::warn("status", st.error().message, {{"motion", motion_id}});
   }
 }
 
 Result<motion::Plan> MotionService::plan(const cell_motion_MotionRequest& request,
-                                         Robot& robot) const {
+                                         Robot& robot, std::optional<Meeting>& meeting) const {
   const motion::Planner& planner = *robot.planner;
   const int dof = planner.model().dof();
   const double scale = request.speed_scale == 0.0 ? 1.0 : request.speed_scale;
@@ -216,7 +221,52 @@ Result<motion::Plan> MotionService::plan(const cell_motion_MotionRequest& reques
       if (!t) {
         return std::move(t).error();
       }
-      return planner.track(q0, *t, request.alter_cumulative, request.alter_world_frame, scale);
+      const auto& v = request.target_velocity_mm_per_s;
+      const Eigen::Vector3d velocity(v.x, v.y, v.z);
+      if (!velocity.allFinite()) {
+        return Error{Errc::kInvalidArgument, "target_velocity_mm_per_s is not finite"};
+      }
+      if (velocity.isZero()) {
+        return planner.track(q0, *t, request.alter_cumulative, request.alter_world_frame, scale,
+                             request.track_joint_interpolated);
+      }
+      // A moving target: meet it where the robot can first be in time. The clocks: the
+      // target's stamp and this host's wall clock (the cell's hosts are synchronised).
+      const double since_stamp_s =
+          static_cast<double>(wall_time_ns() - request.target_stamp_ns) * 1e-9;
+      if (!(std::abs(since_stamp_s) <= config_.max_target_age_s)) {
+        return Error{Errc::kInvalidArgument,
+                     fmt::format("target_stamp_ns is {:.3f} s from this host's clock (at most "
+                                 "{} s): a stale target, or clocks not synchronised",
+                                 since_stamp_s, config_.max_target_age_s)};
+      }
+      if (!(request.meet_margin_s >= 0 && request.meet_margin_s <= 1.0)) {
+        return Error{Errc::kInvalidArgument,
+                     fmt::format("meet_margin_s must be in [0, 1] s, got {}",
+                                 request.meet_margin_s)};
+      }
+      if (!std::isfinite(request.meet_from_mm) || !std::isfinite(request.meet_to_mm) ||
+          (request.meet_to_mm > 0 && request.meet_to_mm < request.meet_from_mm)) {
+        return Error{Errc::kInvalidArgument,
+                     fmt::format("meet window [{}, {}] mm is not a window", request.meet_from_mm,
+                                 request.meet_to_mm)};
+      }
+      motion::MovingTarget moving;
+      moving.at_stamp = *t;
+      moving.velocity_mm_s = velocity;
+      moving.start_s = std::max(0.0, since_stamp_s) + config_.track_start_latency_s;
+      moving.margin_s = request.meet_margin_s;
+      moving.min_travel_mm = request.meet_from_mm;
+      moving.max_travel_mm = request.meet_to_mm;
+      moving.joint_interpolated = request.track_joint_interpolated;
+      auto met = planner.intercept(q0, moving, request.alter_cumulative,
+                                   request.alter_world_frame, scale);
+      if (!met) {
+        return std::move(met).error();
+      }
+      meeting = Meeting{met->meet, request.target_stamp_ns +
+                                       static_cast<std::int64_t>(std::llround(met->meet_s * 1e9))};
+      return std::move(met->plan);
     }
     default:
       return Error{Errc::kInvalidArgument,
@@ -291,9 +341,10 @@ void MotionService::handle_request(const cell_motion_MotionRequest& request) {
                  fmt::format("robot '{}' is in fault: {}", robot_id, robot.view.fault_text)});
     return;
   }
+  std::optional<Meeting> meeting;
   auto planned = [&]() -> Result<motion::Plan> {
     try {
-      return plan(request, robot);
+      return plan(request, robot, meeting);
     } catch (const std::exception& e) {  // the boundary: nothing escapes into the loop
       return Error{Errc::kInvalidArgument, std::string("planning failed: ") + e.what()};
     }
@@ -308,7 +359,7 @@ void MotionService::handle_request(const cell_motion_MotionRequest& request) {
     const auto& end = planned->trajectory.end();
     const std::vector<double> final_joints(end.data(), end.data() + end.size());
     publish(motion_id, request.request_id, robot_id, cell_motion_MOTION_PREVIEW, nullptr, 0.0,
-            duration, &path, &final_joints);
+            duration, &path, &final_joints, meeting ? &*meeting : nullptr);
     log::info("preview", "planned", {{"motion", motion_id}, {"kind", kind},
                                      {"duration_s", fmt::format("{:.3f}", duration)}});
     return;
@@ -325,6 +376,7 @@ void MotionService::handle_request(const cell_motion_MotionRequest& request) {
   active.duration_s = duration;
   const auto& end = planned->trajectory.end();
   active.final_joints.assign(end.data(), end.data() + end.size());
+  active.meeting = meeting;
 
   motion::TrajectoryWire wire;
   motion::to_idl(*planned, robot_id, active.trajectory_id, motion_id, wire);
@@ -338,7 +390,8 @@ void MotionService::handle_request(const cell_motion_MotionRequest& request) {
   robot.active = std::move(active);
   cell_common_RequestId id = robot.active->request_id;
   id.client_id = bus::borrow(robot.active->client_id);
-  publish(motion_id, id, robot_id, cell_motion_MOTION_ACCEPTED, nullptr, 0.0, duration);
+  publish(motion_id, id, robot_id, cell_motion_MOTION_ACCEPTED, nullptr, 0.0, duration, nullptr,
+          nullptr, robot.active->meeting ? &*robot.active->meeting : nullptr);
   log::info("accept", "trajectory sent",
             {{"motion", motion_id}, {"kind", kind}, {"robot", robot_id},
              {"duration_s", fmt::format("{:.3f}", duration)}});
@@ -349,7 +402,7 @@ void MotionService::finish(Robot& robot, cell_motion_MotionState state, const Er
   cell_common_RequestId id = a.request_id;
   id.client_id = bus::borrow(a.client_id);
   publish(a.motion_id, id, a.robot_id, state, error, state == cell_motion_MOTION_DONE ? 1.0 : robot.view.progress,
-          a.duration_s, nullptr, &a.final_joints);
+          a.duration_s, nullptr, &a.final_joints, a.meeting ? &*a.meeting : nullptr);
   log::info("finish", state == cell_motion_MOTION_DONE ? "done" : "failed",
             {{"motion", a.motion_id}, {"reason", error != nullptr ? error->message : ""}});
   finished_.push_back(a.motion_id);
@@ -461,7 +514,7 @@ void MotionService::supervise() {
       cell_common_RequestId rid = a.request_id;
       rid.client_id = bus::borrow(a.client_id);
       publish(a.motion_id, rid, a.robot_id, cell_motion_MOTION_RUNNING, nullptr, v.progress,
-              a.duration_s);
+              a.duration_s, nullptr, nullptr, a.meeting ? &*a.meeting : nullptr);
       a.last_status = steady_clock::now();
     }
   }

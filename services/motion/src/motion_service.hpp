@@ -44,6 +44,12 @@ class MotionService {
     SteadyTime received{};
   };
 
+  /// A moving target's meeting (MOTION_TRACK with a velocity): in every status of the motion.
+  struct Meeting {
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< base_T_tool
+    std::int64_t stamp_ns = 0;                               ///< wall clock
+  };
+
   struct Active {  // a motion sent to a gateway, not finished yet
     std::string motion_id;
     std::string robot_id;
@@ -57,6 +63,7 @@ class MotionService {
     SteadyTime sent{};
     double duration_s = 0.0;
     std::vector<double> final_joints;
+    std::optional<Meeting> meeting;
     SteadyTime last_status{};
   };
 
@@ -67,7 +74,10 @@ class MotionService {
   };
 
   void handle_request(const cell_motion_MotionRequest& request);
-  Result<motion::Plan> plan(const cell_motion_MotionRequest& request, Robot& robot) const;
+  /// Plans `request` from the robot's current joints; a track of a moving target also gives
+  /// where and when it is met (`meeting`).
+  Result<motion::Plan> plan(const cell_motion_MotionRequest& request, Robot& robot,
+                            std::optional<Meeting>& meeting) const;
   void handle_state(const cell_robot_RobotState& state);
   void handle_gateway_reply(const cell_robot_RobotCommandReply& reply);
   void supervise();
@@ -78,7 +88,8 @@ class MotionService {
                const std::string& robot_id, cell_motion_MotionState state,
                const Error* error = nullptr, double progress = 0.0, double duration_s = 0.0,
                const std::vector<Eigen::Isometry3d>* path = nullptr,
-               const std::vector<double>* final_joints = nullptr);
+               const std::vector<double>* final_joints = nullptr,
+               const Meeting* meeting = nullptr);
   void finish(Robot& robot, cell_motion_MotionState state, const Error* error);
 
   service::Context& ctx_;

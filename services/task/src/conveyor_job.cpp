@@ -149,57 +149,78 @@ class ConveyorJob {
     Frame frame;  ///< its frame's exposure, latched count and vision time (parts not copied)
   };
 
-  double grasp_yaw(const Located& part, double z, int symmetry, const RobotView& now) const {
-    if (symmetry <= 0 || !now.known) {
-      return part.yaw_rad;
+  /// Where the tool takes a part: its grasp point (base frame, mm) and the tool's yaw there.
+  struct Grasp {
+    double x_mm = 0.0;
+    double y_mm = 0.0;
+    double yaw_rad = 0.0;
+  };
+
+  /// Of the part's clear grasps (all of them turned by its symmetry), the one whose roll joint
+  /// is nearest its current value while staying a quarter turn inside its limits, judged
+  /// where the arm meets the part: level with the arm along the belt (the roll that puts the
+  /// tool at a yaw depends on where the arm is). A part whose grip vision did not test is
+  /// taken at its centre and its own yaw (and turns).
+  Grasp choose_grasp(const Located& part, double z, int symmetry, const RobotView& now,
+                     const Belt& belt) const {
+    std::vector<Grasp> styles;
+    for (const auto& g : part.grasps) {
+      styles.push_back({g.x_mm, g.y_mm, g.yaw_rad});
+    }
+    if (styles.empty()) {
+      styles.push_back({part.x_mm, part.y_mm, part.yaw_rad});
+    }
+    if (!now.known) {
+      return styles.front();
     }
     const auto& robot = run_.robot();
     const Eigen::Index roll = robot.dof() - 1;
     const auto& spec = robot.joints()[static_cast<std::size_t>(roll)];
     const double margin = std::numbers::pi / 2;
-    const double step = 2 * std::numbers::pi / symmetry;
-    double best = part.yaw_rad;
+    const int n = symmetry <= 0 ? 1 : symmetry;  // a disc: its own yaw will do
+    const double step = 2 * std::numbers::pi / n;
+    const Eigen::Vector3d to_arm =
+        belt.direction * (along(belt, Eigen::Vector3d(now.base_T_tool.translation())) -
+                          along(belt, part));
+    Grasp best = styles.front();
     double best_cost = std::numeric_limits<double>::infinity();
-    for (int k = -symmetry; k <= symmetry; ++k) {
-      const double yaw = part.yaw_rad + step * k;
-      auto q = robot.inverse(task::grasp_pose(robot, part.x_mm, part.y_mm, z, yaw), now.q);
-      if (!q) {
-        continue;
-      }
-      const double r = (*q)[roll];
-      const bool inside = r >= spec.lower + margin && r <= spec.upper - margin;
-      const double cost = std::abs(r - now.q[roll]) + (inside ? 0.0 : 100.0);
-      if (cost < best_cost) {
-        best_cost = cost;
-        best = yaw;
+    for (const Grasp& style : styles) {
+      for (int k = -n; k <= n; ++k) {
+        Grasp g = style;
+        g.yaw_rad += step * k;
+        auto q = robot.inverse(task::grasp_pose(robot, g.x_mm + to_arm.x(), g.y_mm + to_arm.y(),
+                                                z, g.yaw_rad),
+                               now.q);
+        if (!q) {
+          continue;
+        }
+        const double r = (*q)[roll];
+        const bool inside = r >= spec.lower + margin && r <= spec.upper - margin;
+        const double cost = std::abs(r - now.q[roll]) + (inside ? 0.0 : 100.0);
+        if (cost < best_cost) {
+          best_cost = cost;
+          best = g;
+        }
       }
     }
     return best;
   }
 
-  /// The tracking motion's planned duration (the motion service's preview of `r`).
-  Result<double> preview_duration(cell_motion_MotionRequest r) {
-    const std::string id = std::string(bus::str(r.motion_id)) + "-preview";
-    r.motion_id = bus::borrow(id);
-    r.preview_only = true;
-    auto sent = run_.links().send_motion(r);
-    if (!sent) {
-      return std::move(sent).error();
-    }
-    const auto until = Clock::now() + 1000ms;
-    while (Clock::now() < until) {
-      if (auto u = run_.links().poll_motion(*sent); u) {
-        if (u->state == cell_motion_MOTION_PREVIEW) {
-          return u->duration_s;
-        }
-        if (u->terminal) {
-          return Error{Errc::kOutOfRange, fmt::format("cannot track the part: {}", u->reason)};
-        }
+  /// The farthest point along the belt, up to the window's downstream limit, where the arm
+  /// still holds grasp `g` (a part followed along the belt at its lateral place) [mm along
+  /// the belt], found in 5 mm steps back from the limit.
+  double reach_end(const Grasp& g, double z, const Belt& belt, const RobotView& now) const {
+    const auto& robot = run_.robot();
+    const Eigen::Vector3d p0(g.x_mm, g.y_mm, z);
+    const double s0 = along(belt, p0);
+    for (double s = spec_.downstream_mm; s > spec_.upstream_mm; s -= 5.0) {
+      const Eigen::Vector3d p = p0 + belt.direction * (s - s0);
+      if (robot.cartesian_limits().check(p) &&
+          robot.inverse(task::grasp_pose(robot, p.x(), p.y(), z, g.yaw_rad), now.q)) {
+        return s;
       }
-      pump_eye();
-      std::this_thread::sleep_for(1ms);
     }
-    return Error{Errc::kTimeout, "the motion service did not plan the track within 1 s"};
+    return spec_.upstream_mm;
   }
 
   /// Takes the belt camera's new frames: each part located goes into the queue (downstream
@@ -310,7 +331,10 @@ class ConveyorJob {
 
   /// Position of a part along the belt's travel, from the point nearest the robot [mm].
   static double along(const Belt& belt, const Located& l) {
-    return (Eigen::Vector3d(l.x_mm, l.y_mm, belt.nearest.z()) - belt.nearest).dot(belt.direction);
+    return along(belt, Eigen::Vector3d(l.x_mm, l.y_mm, 0.0));
+  }
+  static double along(const Belt& belt, const Eigen::Vector3d& p) {
+    return (Eigen::Vector3d(p.x(), p.y(), belt.nearest.z()) - belt.nearest).dot(belt.direction);
   }
 
   double grasp_z(const std::string& class_name, int& symmetry) const {
@@ -372,13 +396,20 @@ class ConveyorJob {
     // Among the part's symmetric yaws, the one whose roll joint is nearest its current value
     // while staying a quarter turn inside its limits: rolls must not creep toward a limit
     // pick after pick (a line that meets it would need a joint to jump).
+    // The grasp: of the part's clear grasp styles (vision's clear-grip test; the part's own
+    // yaw when it was not tested) and their symmetric turns, the one whose roll joint is
+    // nearest its current value while staying a quarter turn inside its limits. On a fast
+    // belt the roll is what takes the arm longest (a DIP across its body or on its ends: at
+    // most 45 deg), and rolls must not creep toward a limit pick after pick.
     const RobotView now = run_.links().robot(run_.robot().id());
-    const double yaw = grasp_yaw(part, z, symmetry, now);
-    // Where to meet the part: a point downstream of it, reached before the part gets there
-    // (the planned duration, from the motion service's preview, plus a margin). The robot
-    // goes there with ALTER on; the correction, shift(t) - lead, stays 0 until the part
-    // arrives, then follows the belt: continuous from 0, so the arm never jumps, at any belt
-    // speed. lead is the belt travel since exposure at the meeting time.
+    const Grasp grasp = choose_grasp(part, z, symmetry, now, belt);
+    // Where to meet the part: the motion service plans it in one round trip (the earliest
+    // point of the part's path the arm reaches kMeetMarginS before the part, inside the belt
+    // window with room for the grip: the chapter's downstream limit, checked before the arm
+    // moves) and sends the track there. The robot goes there with ALTER on; the correction,
+    // shift(t) - lead, stays 0 until the part arrives, then follows the belt: continuous
+    // from 0, so the arm never jumps, at any belt speed. lead is the belt travel since
+    // exposure at the meeting point.
     const int seq = p["seq"].get<int>() + 1;
     p["seq"] = seq;
     const std::string track_id = fresh(run_, "track", seq);
@@ -390,74 +421,81 @@ class ConveyorJob {
     r.speed_scale = spec_.speed_scale;
     r.alter_cumulative = false;
     r.alter_world_frame = true;
-    const Eigen::Vector3d at_exposure(part.x_mm, part.y_mm, z);
-    const auto reading_now = run_.links().belt(spec_.belt);
+    r.track_joint_interpolated = spec_.track_joint_interpolated;
+    const Eigen::Vector3d at_exposure(grasp.x_mm, grasp.y_mm, z);
+    r.target = geometry::pose_to_idl(
+        task::grasp_pose(run_.robot(), at_exposure.x(), at_exposure.y(), z, grasp.yaw_rad));
+    const double speed = std::abs(reading->speed_mm_per_s);
+    r.target_velocity_mm_per_s = {v_belt.x(), v_belt.y(), v_belt.z()};
+    r.target_stamp_ns = frame.exposure_ns;
+    r.meet_margin_s = kMeetMarginS;
+    const double s_exposure = along(belt, at_exposure);
+    r.meet_from_mm = spec_.upstream_mm - s_exposure;
+    // The grip's end (following the part through the dwell) inside the window too.
+    // The window's downstream end, or sooner where the arm's reach ends (on the belt's far
+    // side the reach ends before a window drawn along the centre line: following the part
+    // there would fault the robot).
+    const double downstream = std::min(spec_.downstream_mm, reach_end(grasp, z, belt, now));
+    r.meet_to_mm = downstream - speed * spec_.dwell_s - s_exposure;
+    // Where the part is now (its frame may have waited in the queue while the arm was busy).
     const double travel_now =
-        belt.mm_per_count *
-        static_cast<double>((reading_now ? reading_now->count : frame.belt_count) -
-                            frame.belt_count);
-    const double speed = std::abs(reading_now ? reading_now->speed_mm_per_s : 0.0);
-    // First guess: where the arm already is along the belt (it waits downstream of the camera).
-    double lead_mm = travel_now;
-    if (now.known) {
-      lead_mm = std::max(lead_mm, (now.base_T_tool.translation() - at_exposure).dot(belt.direction));
+        belt.mm_per_count * static_cast<double>(reading->count - frame.belt_count);
+    if (speed <= 0.0 || r.meet_to_mm <= travel_now || r.meet_to_mm < r.meet_from_mm) {
+      run_.count("outside_window");
+      record(part, cell_task_PART_SKIPPED_OUTSIDE_WINDOW,
+             speed <= 0.0 ? std::string("the belt is not moving")
+                          : fmt::format("{:.0f} mm along the belt now: no room left in the "
+                                        "window [{:.0f}, {:.0f}] mm for the grip",
+                                        s_exposure + travel_now, spec_.upstream_mm, downstream));
+      (void)run_.step("part skipped");
+      return std::nullopt;
     }
-    double planned_s = 0.0;
-    const auto aim = [&] {
-      r.target = geometry::pose_to_idl(task::grasp_pose(
-          run_.robot(), at_exposure.x() + belt.direction.x() * lead_mm,
-          at_exposure.y() + belt.direction.y() * lead_mm, z, yaw));
-    };
-    for (int pass = 0; pass < 5; ++pass) {
-      aim();
-      const auto d = preview_duration(r);
-      if (!d) {
-        // A meeting point the arm cannot reach is outside the window; anything else failed.
-        const bool reach = d.error().code == Errc::kOutOfRange;
-        run_.count(reach ? "outside_window" : "motion_failed");
-        record(part, reach ? cell_task_PART_SKIPPED_OUTSIDE_WINDOW : cell_task_PART_MISSED,
-               d.error().message);
-        return std::nullopt;
-      }
-      planned_s = *d;
-      const double needed_mm =
-          travel_now + speed * (planned_s + kStartLatencyS + kMeetMarginS);
-      if (needed_mm <= lead_mm + 1.0) {
-        break;  // the robot is there before the part
-      }
-      lead_mm = needed_mm;
-    }
-    aim();  // the target is where lead_mm says, whatever pass ended the loop
-    // The downstream limit before the robot moves (the chapter's downstr_lim): the meeting
-    // point and the grip's end (following the part through the dwell) inside the window.
-    const double s_meet =
-        (Eigen::Vector3d(part.x_mm, part.y_mm, belt.nearest.z()) + belt.direction * lead_mm -
-         belt.nearest)
-            .dot(belt.direction);
-    {
-      const double s_end = s_meet + speed * spec_.dwell_s;
-      if (s_end > spec_.downstream_mm || s_meet < spec_.upstream_mm) {
-        run_.count("outside_window");
-        record(part, cell_task_PART_SKIPPED_OUTSIDE_WINDOW,
-               fmt::format("the grasp would be {:.0f} to {:.0f} mm along the belt, outside the "
-                           "window [{:.0f}, {:.0f}] mm",
-                           s_meet, s_end, spec_.upstream_mm, spec_.downstream_mm));
-        (void)run_.step("part skipped");
-        return std::nullopt;
-      }
-    }
-    const Eigen::Vector3d lead = belt.direction * lead_mm;
     moved_ = true;
-    r.preview_only = false;
     auto sent = run_.links().send_motion(r);
     if (!sent) {
       return ExecResult::failed(sent.error().message);
     }
+    // The answer: accepted with the meeting point, or refused (no point of the window can be
+    // met in time: outside the window; anything else failed).
+    std::int64_t accepted_ns = 0;  // wall clock when the motion service took the track
+    std::optional<Links::MotionUpdate> first;
+    const auto answer_by = Clock::now() + 2000ms;
+    while (!first && Clock::now() < answer_by) {
+      first = run_.links().poll_motion(*sent);
+      if (!first) {
+        pump_eye();
+        std::this_thread::sleep_for(200us);
+      }
+    }
+    if (!first) {
+      run_.count("motion_failed");
+      record(part, cell_task_PART_MISSED, "the motion service did not answer the track in 2 s");
+      return recover_after_stop();
+    }
+    if (first->state == cell_motion_MOTION_REFUSED) {
+      moved_ = false;  // refused: the arm did not move
+      const bool window = first->error_code == "out_of_range";
+      run_.count(window ? "outside_window" : "motion_failed");
+      record(part, window ? cell_task_PART_SKIPPED_OUTSIDE_WINDOW : cell_task_PART_MISSED,
+             first->reason);
+      (void)run_.step("part skipped");
+      return std::nullopt;
+    }
+    if (first->meet_stamp_ns == 0 || (first->terminal && first->state != cell_motion_MOTION_DONE)) {
+      run_.count("motion_failed");
+      record(part, cell_task_PART_MISSED,
+             first->terminal ? first->reason
+                             : "the motion service gave no meeting point for the track");
+      return recover_after_stop();
+    }
+    accepted_ns = wall_time_ns();
+    const double lead_mm = (first->meet_target.translation() - at_exposure).dot(belt.direction);
+    const double s_meet = s_exposure + lead_mm;
+    const Eigen::Vector3d lead = belt.direction * lead_mm;
     run_.report(fmt::format("tracking part ({} picked)", picked()), fraction());
     // Stage 2: ALTER every cycle until the motion arrives, then through the grip.
     std::uint64_t cycle = 0;
-    std::int64_t accepted_ns = 0;  // wall clock when the motion service took the track
-    bool arrived = false;
+    bool arrived = first->terminal;  // DONE already (a status batch can hold several)
     std::string trajectory_id;
     auto next = Clock::now();
     const auto give_up = Clock::now() + std::chrono::milliseconds(static_cast<std::int64_t>(
@@ -482,8 +520,8 @@ class ConveyorJob {
           Eigen::Vector3d c = shift_at(latest->count) - lead;
           // Never past the window's downstream limit: there the part escapes (the arm holds
           // at the limit and this part is counted outside the window).
-          if (s_meet + c.dot(belt.direction) > spec_.downstream_mm) {
-            c = belt.direction * std::max(0.0, spec_.downstream_mm - s_meet);
+          if (s_meet + c.dot(belt.direction) > downstream) {
+            c = belt.direction * std::max(0.0, downstream - s_meet);
             escaped = true;
           }
           const bool met = c.dot(belt.direction) > 0.0;
@@ -497,7 +535,7 @@ class ConveyorJob {
           Eigen::Vector3d rate = Eigen::Vector3d::Zero();
           double horizon_s = 0.0;  // the gateway's own
           if (met && !escaped) {
-            const double room = spec_.downstream_mm - (s_meet + c.dot(belt.direction));
+            const double room = downstream - (s_meet + c.dot(belt.direction));
             rate = v_belt;
             if (speed * trajectory::AlterState::kExtrapolationHorizonS > room) {
               // At least 1 us: 0 would mean the gateway's horizon.
@@ -523,9 +561,6 @@ class ConveyorJob {
         return let_go("the tracking motion did not end in time");
       }
       if (auto u = run_.links().poll_motion(*sent); u) {
-        if (accepted_ns == 0 && u->state != cell_motion_MOTION_REFUSED) {
-          accepted_ns = wall_time_ns();
-        }
         if (u->terminal) {
           if (u->state != cell_motion_MOTION_DONE) {
             run_.count("motion_failed");
@@ -606,7 +641,7 @@ class ConveyorJob {
                     {"yaw", part.yaw_rad},
                     {"pick_z", z},
                     {"place_z", place_z},
-                    {"place_yaw", slot.yaw_rad + (yaw - part.yaw_rad)},
+                    {"place_yaw", slot.yaw_rad + (grasp.yaw_rad - part.yaw_rad)},
                     {"depart_id", fresh(run_, "depart", seq)},
                     {"place_id", fresh(run_, "place", seq)},
                     {"stage", "depart"}};
@@ -762,8 +797,6 @@ class ConveyorJob {
   Clock::time_point resumed_at_;
   std::deque<Queued> queue_;
   bool moved_ = false;  ///< a part was tracked since the robot was last at its ready pose
-  /// From the preview to the arm moving (the real request, planning, the gateway's start).
-  static constexpr double kStartLatencyS = 0.02;
   /// The robot is at the meeting point this long before the part.
   static constexpr double kMeetMarginS = 0.03;
 };

@@ -298,7 +298,14 @@ std::optional<Links::MotionUpdate> Links::poll_motion(std::uint64_t seq) {
     u.progress = s->progress;
     u.duration_s = s->duration_s;
     u.reason = std::string(bus::str(s->reason));
+    u.error_code = std::string(bus::str(s->error_code));
     u.terminal = terminal(s->state);
+    if (s->meet_stamp_ns != 0) {
+      if (auto meet = geometry::pose_from_idl(s->meet_target); meet) {
+        u.meet_target = *meet;
+        u.meet_stamp_ns = s->meet_stamp_ns;
+      }
+    }
     if (!latest || !latest->terminal) {
       latest = u;
     }
@@ -351,6 +358,10 @@ Frame to_frame(const cell_vision_Detections& d) {
     l.grip_style = item.grip_style;
     l.grip_detail = std::string(bus::str(item.grip_detail));
     l.touching = item.touching;
+    for (const auto& g : bus::span(item.clear_grasps)) {
+      l.grasps.push_back({g.style, std::string(bus::str(g.name)), g.base_pose.x_mm,
+                          g.base_pose.y_mm, g.base_pose.rz_rad});
+    }
     f.parts.push_back(std::move(l));
   }
   return f;

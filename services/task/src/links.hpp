@@ -80,6 +80,17 @@ struct Located {
   cell_vision_GripClearance grip = cell_vision_GRIP_NOT_TESTED;
   std::int32_t grip_style = -1;
   std::string grip_detail;
+  /// Every clear grasp style (vision's clear-grip test, in style order): where the tool goes
+  /// (base frame, mm) and its yaw there (the fingers close along the tool's y axis). Empty
+  /// when the grip was not tested.
+  struct Grasp {
+    std::int32_t style = -1;
+    std::string name;
+    double x_mm = 0.0;
+    double y_mm = 0.0;
+    double yaw_rad = 0.0;
+  };
+  std::vector<Grasp> grasps;
   bool touching = false;
   bool has_pose = false;
 };
@@ -168,7 +179,12 @@ class Links {
     double progress = 0.0;
     double duration_s = 0.0;
     std::string reason;
+    std::string error_code;  ///< REFUSED/FAILED: cell::to_string(Errc), e.g. "out_of_range"
     bool terminal = false;
+    /// A track of a moving target: where (base_T_tool) and when (wall clock) it is met;
+    /// meet_stamp_ns 0 otherwise.
+    Eigen::Isometry3d meet_target = Eigen::Isometry3d::Identity();
+    std::int64_t meet_stamp_ns = 0;
   };
   std::optional<MotionUpdate> poll_motion(std::uint64_t seq);
 

@@ -57,6 +57,8 @@ struct DetectionsHolder {
   std::vector<std::string> shapes;
   std::vector<std::string> details;
   std::vector<std::vector<cell_vision_PixelPoint>> corners;
+  /// Per item; the names are borrowed from the located Detections, which outlive the write.
+  std::vector<std::vector<cell_vision_GraspPose>> grasps;
   std::vector<cell_vision_Detection> items;
 };
 
@@ -345,6 +347,7 @@ void VisionService::process(Camera& cam, const Frame& frame) {
     h.shapes.reserve(dets.size());
     h.details.reserve(dets.size());
     h.corners.reserve(dets.size());
+    h.grasps.reserve(dets.size());
     h.items.reserve(dets.size());
     for (std::size_t i = 0; i < dets.size(); ++i) {
       const Detection& d = dets[i];
@@ -354,6 +357,14 @@ void VisionService::process(Camera& cam, const Frame& frame) {
       auto& corners = h.corners.emplace_back();
       for (const auto& c : d.corners_px) {
         corners.push_back({c.x(), c.y()});
+      }
+      auto& grasps = h.grasps.emplace_back();
+      for (const BaseGrasp& g : d.base_grasps) {
+        cell_vision_GraspPose pose{};
+        pose.style = g.style;
+        pose.name = bus::borrow(g.name);
+        pose.base_pose = {g.tool.x_mm, g.tool.y_mm, g.tool.rz_rad};
+        grasps.push_back(pose);
       }
       cell_vision_Detection item{};
       item.id = static_cast<std::uint32_t>(i);
@@ -375,6 +386,7 @@ void VisionService::process(Camera& cam, const Frame& frame) {
       item.width_px = d.width_px;
       item.shape = bus::borrow(h.shapes.back());
       item.touching = d.touching;
+      bus::borrow(item.clear_grasps, grasps);
       h.items.push_back(item);
     }
   }

@@ -12,6 +12,30 @@
 
 namespace cell::motion {
 
+/// A target moving at constant velocity (a part riding a belt) for Planner::intercept. Base
+/// frame, mm, s. Times count from the target's stamp: the instant it was at `at_stamp` (a belt
+/// camera's exposure).
+struct MovingTarget {
+  Eigen::Isometry3d at_stamp = Eigen::Isometry3d::Identity();  ///< base_T_tool to reach then
+  Eigen::Vector3d velocity_mm_s = Eigen::Vector3d::Zero();     ///< non-zero, finite
+  double start_s = 0.0;   ///< when the robot starts moving, from the stamp (>= 0)
+  double margin_s = 0.0;  ///< the robot is at the meeting point this long before the target
+  /// The meeting point lies between these travels from at_stamp along the velocity [mm] (a
+  /// belt window); max_travel_mm <= 0: no limit but the robot's reach (and 5 s of travel).
+  double min_travel_mm = 0.0;
+  double max_travel_mm = 0.0;
+  bool joint_interpolated = false;  ///< joint move to the meeting point, else a straight line
+};
+
+/// Where and when the robot meets a MovingTarget, and the plan that takes it there.
+struct Intercept {
+  Plan plan;                    ///< to the meeting point, ALTER enabled
+  Eigen::Isometry3d meet;       ///< base_T_tool at the meeting point
+  double meet_s = 0.0;          ///< when the target reaches it, from its stamp
+  double travel_mm = 0.0;       ///< from at_stamp along the velocity
+  int candidates = 0;           ///< meeting points planned to find it (its cost)
+};
+
 /// Planner settings (config/motion.yaml `planner:` section).
 struct PlannerOptions {
   trajectory::LinearMoveOptions linear;  ///< straight-line limits (speed_scale is per request)
@@ -56,9 +80,24 @@ class Planner {
   /// and dwell, straight back up. One trajectory with the gripper event at the bottom.
   Result<Plan> pick_or_place(const trajectory::JointVector& q0, const Eigen::Isometry3d& target,
                              double distance_mm, bool close, double speed_scale) const;
-  /// Straight line to `target` with ALTER enabled (the destination follows corrections).
+  /// Straight line to `target` with ALTER enabled (the destination follows corrections);
+  /// `joint_interpolated`: a joint move instead (faster, the path not straight).
   Result<Plan> track(const trajectory::JointVector& q0, const Eigen::Isometry3d& target,
-                     bool cumulative, bool world_frame, double speed_scale) const;
+                     bool cumulative, bool world_frame, double speed_scale,
+                     bool joint_interpolated = false) const;
+
+  /// Plans where to meet a moving target: the earliest point of its path that the robot,
+  /// starting at target.start_s from q0, reaches target.margin_s before the target does,
+  /// within the travel window (the conveyor chapter's downstream limit checked before the
+  /// robot moves), and the track there (ALTER enabled: the caller's corrections make the
+  /// destination follow the target once it arrives). Found by stepping the meeting time
+  /// along the path (10 mm of travel a step) and then halving the last step to 0.2 mm, so
+  /// the earliest meeting is found even where a later one needs a longer move.
+  /// Errors: kOutOfRange when no point of the window can be met (the reason gives the last
+  /// planning failure, if any, and how late the robot would be at the window's end);
+  /// kInvalidArgument on a zero or non-finite velocity or bad times.
+  Result<Intercept> intercept(const trajectory::JointVector& q0, const MovingTarget& target,
+                              bool cumulative, bool world_frame, double speed_scale) const;
 
   /// The tool pose `distance_mm` "above" `base_T_tool` (see the class comment).
   Eigen::Isometry3d above(const Eigen::Isometry3d& base_T_tool, double distance_mm) const;

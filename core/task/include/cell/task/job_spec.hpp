@@ -89,6 +89,10 @@ struct ConveyorPickSpec {
   std::optional<double> place_z_mm;
   double dwell_s = 0.1;             ///< gripper closing time while tracking
   double alter_period_s = 0.004;    ///< ALTER cycle (the chapter's 16 ms; aim 1-4 ms)
+  /// How the robot goes to the meeting point (`track_motion: joint | line`): a joint move
+  /// (default: a SCARA gets there sooner, its path a slight arc over the belt) or a straight
+  /// line (V+ MOVES).
+  bool track_joint_interpolated = true;
   /// Where the tool waits between picks, x-y in the robot's base frame at travel_z_mm
   /// (default: above the belt, halfway from the point nearest the robot to the upstream limit).
   std::optional<Eigen::Vector2d> ready_mm;

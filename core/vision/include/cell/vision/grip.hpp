@@ -15,7 +15,8 @@
 /// recognised part, k grasp styles of a p = 2 finger gripper; each style puts two rectangular
 /// fingerprint windows beside the part; a style is authorised only when both windows are free
 /// of other parts; the first clear style wins (`CF(Gs_m_i, O)`), and the result says why the
-/// others failed.
+/// styles before it failed. Every clear style is also listed with where the tool goes
+/// (ClearGrasp), so a picker can choose among them (e.g. the one needing the least roll).
 ///
 /// Frames and units. The geometry (eq. 5-7) works in any planar frame in which the part's
 /// centroid C and angle.aim (its major axis, MIA) are given, in mm and rad: vision uses its
@@ -106,20 +107,43 @@ enum class GripVerdict : std::uint8_t { kNotTested, kClear, kBlocked };
 /// "not_tested", "clear", "blocked".
 std::string_view to_string(GripVerdict verdict) noexcept;
 
+/// One clear grasp style of a part: where the tool goes and how it is turned, in the frame of
+/// the part's centroid `c` given to test_clear_grip (vision: the plane frame), mm and rad.
+///
+/// Tool convention: the cell's parallel grippers close their fingers along the TOOL's y axis.
+/// In the grip model x_g joins the two fingers and grasp.angle = beta + rz.off
+/// (FingerprintPlacement), so the tool's yaw (its x axis) is grasp.angle - pi/2 and the tool
+/// point is the grasp point G (eq. 6). For "across" (alpha 0, rz.off 90 deg, d.cg 0) the tool
+/// yaw is the part's major-axis angle (tool x along the part's length); for "ends" (rz.off 0)
+/// it is that angle - 90 deg.
+struct ClearGrasp {
+  int style = -1;    ///< index of the style in GraspModel::styles
+  std::string name;  ///< its name ("across", "ends", ...)
+  /// G = C - d.cg (cos beta, sin beta) (eq. 6), in the frame of `c` [mm].
+  Eigen::Vector2d grasp = Eigen::Vector2d::Zero();
+  /// grasp.angle - pi/2 = angle.aim + alpha + rz.off - pi/2, same frame [rad]; neither wrapped
+  /// nor folded to the part's or the gripper's symmetry.
+  double tool_yaw_rad = 0.0;
+};
+
 /// The clear-grip result of one part.
 struct GripResult {
   GripVerdict verdict = GripVerdict::kNotTested;
   int style = -1;          ///< index of the first clear style, -1 when none
   std::string style_name;  ///< its name
-  /// One clause per style tried before (and, when blocked, every style): "style 0 'across':
-  /// fingerprint 2 has 37 of 140 px taken by another part (tolerance 4)". Empty when style 0 is
-  /// clear.
+  /// One clause per style tried before the first clear one (and, when blocked, every style):
+  /// "style 0 'across': fingerprint 2 has 37 of 140 px taken by another part (tolerance 4)".
+  /// Empty when style 0 is clear; styles after the first clear one are not explained here.
   std::string detail;
+  /// Every clear style, in style order (the first is `style`); empty unless kClear.
+  std::vector<ClearGrasp> clear;
 };
 
-/// Runs the styles of `model` in order for a part at (c, angle.aim) and returns the first clear
-/// one, or kBlocked with every reason. `to_pixels` maps window corners to the image,
-/// `count` measures a window there.
+/// Runs every style of `model` for a part at (c, angle.aim): `verdict`, `style`, `style_name`
+/// name the first clear one (or kBlocked with every reason) and `clear` lists all the clear
+/// ones with their tool poses. `to_pixels` maps window corners to the image, `count` measures a
+/// window there (both called for every style). No errors: an unmappable window blocks its
+/// style. Thread-safe as far as the callbacks are.
 GripResult test_clear_grip(const GraspModel& model,
                            const Eigen::Vector2d& c,
                            double angle_aim_rad,

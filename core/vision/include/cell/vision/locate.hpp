@@ -102,6 +102,17 @@ struct LocateOptions {
   Status validate() const;
 };
 
+/// A clear grasp style of a detection in the robot's base frame: where the tool goes and its
+/// yaw there. The cell's parallel grippers close their fingers along the tool's y axis
+/// (ClearGrasp in grip.hpp: tool yaw = grasp.angle - pi/2, tool point = G).
+struct BaseGrasp {
+  int style = -1;    ///< index of the style in the class's GraspModel::styles
+  std::string name;  ///< its name ("across", "ends", ...)
+  /// G and the tool yaw mapped by PixelMapper::to_base like Detection::base_pose: x, y [mm],
+  /// rz [rad] as mapped, NOT folded to the part's symmetry (a picker adds symmetric copies).
+  BasePose2 tool;
+};
+
 /// One part found in an image.
 struct Detection {
   std::string class_name;  ///< catalogue class ("dip14") or, with no match, the shape name
@@ -125,7 +136,11 @@ struct Detection {
   bool touching = false;    ///< split from a blob shared with other parts
   double fit_rms_px = 0.0;  ///< RMS distance of the edge samples from the fitted outline
   int edge_samples = 0;     ///< sub-pixel crossings in the final fit (fast pipeline)
-  GripResult grip;
+  GripResult grip;          ///< its `clear` grasps are in the plane frame
+  /// grip.clear in the robot's base frame, in style order: filled when the grip was tested,
+  /// found clear styles and the detection has a base pose (else empty). A style whose grasp
+  /// point the planar model cannot map (outside its quadrant) is left out.
+  std::vector<BaseGrasp> base_grasps;
 };
 
 /// Per-frame figures.

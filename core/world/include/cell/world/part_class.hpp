@@ -23,9 +23,11 @@
 /// Default for every built-in class: the top centre, Trans(0, 0, height_mm), axes parallel to
 /// the part frame (z UP, like the tool frame of the cell's SCARAs, core/kinematics scara.hpp).
 /// Capture (core/world world.hpp) compares tool POINTS with the grasp point (distance) and the
-/// tool's x axis with the grasp x axis as yaw about the vertical, modulo the class's
-/// `yaw_symmetry`; the tool's z axis may point up (SCARA) or down (a 6-axis arm's approach
-/// vector), so it is not compared beyond a tilt tolerance from the vertical.
+/// tool's x axis, as yaw about the vertical, with the grasp x axis turned by each of the class's
+/// `grasp_yaws_rad` (a parallel-jaw gripper takes a DIP across its body at 0 or on its ends at
+/// 90 deg), each modulo the class's `yaw_symmetry`; the best of them counts. The tool's z axis
+/// may point up (SCARA) or down (a 6-axis arm's approach vector), so it is not compared beyond a
+/// tilt tolerance from the vertical.
 namespace cell::world {
 
 /// Shape family of a part class (mirrors the IDL enum cell_world_PartShape).
@@ -102,6 +104,16 @@ struct PartClass {
   /// a parallel-jaw grip is the same turned by 180 deg), 4 (square), 3 (triangle), 0 (disc: any
   /// yaw), 1 (polyhedra: none).
   int yaw_symmetry = 1;
+  /// Yaws about the part's z axis [rad], in the part frame, at which the cell's grippers can
+  /// take the part, each relative to part_T_grasp's own yaw (the tool's x axis turned by it
+  /// from the grasp x axis); each also counts at its `yaw_symmetry` copies. Capture takes the
+  /// one nearest the tool's yaw. The grippers' opening is not modelled (a 90 deg grasp of a
+  /// long part is accepted whatever the jaws' stroke). Built-in defaults: {0, pi/2} for DIPs
+  /// (across the body, on its ends), rectangles and boxes with length != width; {0} for
+  /// squares and square boxes (yaw_symmetry 4 covers 90 deg), discs, triangles and polyhedra.
+  /// Scene key `grasp_yaws_deg`.
+  /// Never empty (validate()).
+  std::vector<double> grasp_yaws_rad = {0.0};
   /// Outline seen from above (convex hull of the part projected on its base plane, leads
   /// included), counter-clockwise, part frame [mm]. Filled by finalize().
   std::vector<Eigen::Vector2d> footprint;
@@ -112,7 +124,7 @@ struct PartClass {
   /// Ok, or kInvalidArgument naming the class and the offending field: a non-finite or
   /// non-positive size, reflectance outside [0, 1], a square/disc with length != width, a DIP
   /// with an odd pin count or pins that do not fit the body length, a polyhedron with a bad
-  /// mesh, a grasp pose that is not rigid.
+  /// mesh, a grasp pose that is not rigid, an empty or non-finite grasp_yaws_rad.
   Status validate() const;
 
   /// Fills footprint and hull_points from the shape and sizes (idempotent). The make_*
@@ -123,7 +135,8 @@ struct PartClass {
 /// A DIP class: body `length_mm` x `width_mm`, `pins` at 2.54 mm pitch, pin rows
 /// `row_spacing_mm` apart (7.62 for the 0.3" package, 10.16 for 0.4", 15.24 for 0.6"; the body
 /// is 3.30 mm thick, 3.81 mm from 0.6" on, over a 0.51 mm standoff). Reflectance 0.1 (black
-/// epoxy). Grasp: top centre of the body. validate() fails unless pins is even and the pin
+/// epoxy). Grasp: top centre of the body, across it or on its ends (grasp_yaws_rad
+/// {0, pi/2}). validate() fails unless pins is even and the pin
 /// rows, shoulders included, fit the body length.
 PartClass make_dip(std::string name,
                    int pins,
@@ -134,7 +147,9 @@ PartClass make_dip(std::string name,
 
 /// A flat or 3-D prism class of shape kRectangle, kSquare, kDisc, kTriangle or kBox (for a
 /// disc `length_mm` is the diameter and `width_mm` is ignored; for a triangle `length_mm` is
-/// the side and width is derived; for a square width is set to length).
+/// the side and width is derived; for a square width is set to length). Grasp: top centre;
+/// grasp_yaws_rad {0, pi/2} for a rectangle (of any sides: its yaw_symmetry is 2) or a box
+/// with length != width, {0} otherwise (a square box has yaw_symmetry 4).
 PartClass make_prism(std::string name,
                      Shape shape,
                      double length_mm,

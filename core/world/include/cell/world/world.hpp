@@ -72,7 +72,8 @@ struct WorldOptions {
   /// A closing gripper takes a part when its tool point is within this distance of the part's
   /// grasp point (3-D) [mm]. Digest 000 §7: recognition is good to ~0.5 mm, the robot to ~1 mm.
   double capture_tolerance_mm = 2.0;
-  /// ... and its x axis within this yaw of the grasp x axis, modulo the class symmetry [rad].
+  /// ... and its x axis within this yaw of the grasp x axis turned by one of the class's
+  /// grasp_yaws_rad, modulo the class symmetry [rad].
   double capture_yaw_tolerance = 0.17453292519943295;  // 10 deg
   /// ... and its z axis within this angle of the vertical (up or down) [rad].
   double capture_tilt_tolerance = 0.17453292519943295;  // 10 deg
@@ -145,8 +146,9 @@ class World {
   /// Takes one robot observation (a RobotState): the tool pose in the robot's base frame and
   /// the gripper state. Held parts follow the tool. On a transition of the gripper into
   /// kClosing or kClosed (from a known open state), the nearest free part whose grasp point is
-  /// within capture_tolerance_mm of the tool point (yaw and tilt within theirs) attaches:
-  /// kAttached, or kMissed naming the nearest part and its distance. On a transition into
+  /// within capture_tolerance_mm of the tool point (yaw and tilt within theirs; the yaw error
+  /// is the smallest over the class's grasp_yaws_rad) attaches: kAttached, or kMissed naming
+  /// the nearest part, its distance and its yaw error. On a transition into
   /// kOpening or kOpen, every part the robot holds is released: it drops flat (keeping its x,
   /// y and yaw about the vertical) onto the highest surface below its origin (a belt, the table
   /// or the floor): kReleased. The first observation of a robot only records its state;
