@@ -64,6 +64,16 @@ json detection_json(const vision::Detection& d) {
                     {"style", d.grip.style},
                     {"style_name", d.grip.style_name},
                     {"detail", d.grip.detail}};
+    // Every clear style, where the tool goes in the robot's base frame (fingers along tool y).
+    json clear = json::array();
+    for (const auto& g : d.base_grasps) {
+      clear.push_back({{"style", g.style},
+                       {"name", g.name},
+                       {"x_mm", round3(g.tool.x_mm)},
+                       {"y_mm", round3(g.tool.y_mm)},
+                       {"yaw_deg", round3(g.tool.rz_rad * kRadToDeg)}});
+    }
+    part["grip"]["clear"] = clear;
   }
   return part;
 }

@@ -72,6 +72,7 @@ TEST_F(LocateCommandsTest, LocatesEveryPartWithItsWorldPose) {
   EXPECT_EQ(out["width_px"], 512);
   EXPECT_EQ(out["pipeline"], "fast");
   ASSERT_EQ(out["parts"].size(), frame.truth.size());
+  int clear_grips = 0;
   for (const auto& t : frame.truth) {
     const json* best = nullptr;
     double best_d = 1e9;
@@ -97,7 +98,20 @@ TEST_F(LocateCommandsTest, LocatesEveryPartWithItsWorldPose) {
     EXPECT_NEAR((*best)["world"]["x_mm"].get<double>(), base.x(), 0.1);
     EXPECT_NEAR((*best)["world"]["y_mm"].get<double>(), base.y(), 0.1);
     EXPECT_GT((*best)["length_mm"].get<double>(), 5.0);
+    // A clear grip lists every clear style with where the tool goes (config/vision.yaml's
+    // styles grip the centre: across the body, or on its ends a quarter turn away).
+    if (best->contains("grip") && (*best)["grip"]["verdict"] == "clear") {
+      ++clear_grips;
+      const json& clear = (*best)["grip"]["clear"];
+      ASSERT_FALSE(clear.empty()) << best->dump();
+      EXPECT_EQ(clear[0]["style"], (*best)["grip"]["style"]);
+      for (const json& g : clear) {
+        EXPECT_NEAR(g["x_mm"].get<double>(), base.x(), 0.1) << g.dump();
+        EXPECT_NEAR(g["y_mm"].get<double>(), base.y(), 0.1) << g.dump();
+      }
+    }
   }
+  EXPECT_GT(clear_grips, 0);
   // The text form says the same in one line per part.
   const CliRun text =
       cellctl({"locate", image, "--calibration", path("true.yaml"), "--joints", "45,135,0,0"});

@@ -8,6 +8,7 @@
 
 #include "cell/bus/request_reply.hpp"
 #include "cell/bus/view.hpp"
+#include "cell/common/time.hpp"
 #include "cell/motion/wire.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
@@ -231,6 +232,65 @@ TEST_F(MotionServiceTest, PickClosesTheGripperAndASecondRequestMeanwhileIsRefuse
         return closed;
       },
       3s));
+}
+
+}  // namespace
+}  // namespace cell::motion_service
+
+namespace cell::motion_service {
+namespace {
+
+// A track of a moving target (a part on a belt): the service says where and when the robot
+// meets it, in the preview and in every status of the motion; a stale stamp and a window the
+// robot cannot make are refused with the reason.
+TEST_F(MotionServiceTest, ATrackOfAMovingTargetSaysWhereAndWhenItIsMet) {
+  auto track = [&](double speed_mm_s, std::int64_t stamp_ns, double to_mm, bool preview) {
+    auto r = request(cell_motion_MOTION_TRACK);
+    Eigen::Isometry3d at = Eigen::Isometry3d::Identity();
+    at.translation() = Eigen::Vector3d(150, 560, -200);
+    r.target = motion::to_idl(at);
+    r.target_velocity_mm_per_s = {0, -speed_mm_s, 0};
+    r.target_stamp_ns = stamp_ns;
+    r.meet_margin_s = 0.02;
+    r.meet_from_mm = 0;
+    r.meet_to_mm = to_mm;
+    r.alter_world_frame = true;
+    r.track_joint_interpolated = true;
+    r.preview_only = preview;
+    return r;
+  };
+  const std::int64_t stamp = wall_time_ns();
+  auto r = track(100, stamp, 300, true);
+  auto preview = send(r);
+  ASSERT_EQ(preview->state, cell_motion_MOTION_PREVIEW) << bus::str(preview->reason);
+  auto meet = motion::from_idl(preview->meet_target);
+  ASSERT_TRUE(meet);
+  const double meet_s = static_cast<double>(preview->meet_stamp_ns - stamp) * 1e-9;
+  EXPECT_GT(meet_s, preview->duration_s);  // the robot is there before the target
+  EXPECT_NEAR(meet->translation().y(), 560 - 100 * meet_s, 1e-3);
+  EXPECT_NEAR(meet->translation().x(), 150, 1e-9);
+  EXPECT_LE(560 - meet->translation().y(), 300 + 1e-6);  // inside the window
+  // The real one: the meeting comes with ACCEPTED and stays in the final status.
+  r = track(100, wall_time_ns(), 300, false);
+  auto done = send(r);
+  ASSERT_EQ(done->state, cell_motion_MOTION_DONE) << bus::str(done->reason);
+  EXPECT_GT(done->meet_stamp_ns, 0);
+  // Stale, and too fast for the window: refused with why.
+  auto stale = track(100, wall_time_ns() - 10'000'000'000, 300, true);
+  auto refused = send(stale);
+  EXPECT_EQ(refused->state, cell_motion_MOTION_REFUSED);
+  EXPECT_THAT(bus::str(refused->reason), HasSubstr("target_stamp_ns is 10.0"));
+  auto fast = track(5000, wall_time_ns(), 600, true);
+  refused = send(fast);
+  EXPECT_EQ(refused->state, cell_motion_MOTION_REFUSED);
+  EXPECT_EQ(bus::str(refused->error_code), "out_of_range");
+  EXPECT_THAT(bus::str(refused->reason), HasSubstr("cannot meet the target at 5000 mm/s"));
+  EXPECT_THAT(bus::str(refused->reason), HasSubstr("ms late"));
+  auto gone = track(5000, wall_time_ns(), 50, true);  // out of the window before it starts
+  EXPECT_THAT(bus::str(send(gone)->reason), HasSubstr("before the robot can start"));
+  auto garbage = track(100, wall_time_ns(), 300, true);
+  garbage.target_velocity_mm_per_s.x = NAN;
+  EXPECT_THAT(bus::str(send(garbage)->reason), HasSubstr("not finite"));
 }
 
 }  // namespace

@@ -114,7 +114,8 @@ class ConveyorJob {
       if (queue_.empty()) {
         run_.report(fmt::format("waiting for a part on {} ({} picked)", spec_.belt, picked()),
                     fraction());
-        if (auto r = stop_if(run_.sleep(0.002)); r) {
+        (void)run_.links().wait_frames(5ms);  // a frame wakes it at once
+        if (auto r = stop_if(interrupt_of(run_.control())); r) {
           return *r;
         }
         continue;
@@ -649,9 +650,12 @@ class ConveyorJob {
     // to the gateway): the chapter's stage-1 latency (bench/task).
     const double exposure_to_track_ms =
         accepted_ns > 0 ? static_cast<double>(accepted_ns - frame.exposure_ns) * 1e-6 : -1.0;
-    if (auto s = run_.step("gripped", {{"class", part.class_name},
-                                       {"exposure_to_track_ms", exposure_to_track_ms},
-                                       {"vision_ms", frame.processing_ms}});
+    if (auto s = run_.step("gripped",
+                           {{"class", part.class_name},
+                            {"exposure_to_track_ms", exposure_to_track_ms},
+                            {"exposure_to_frame_ms",
+                             static_cast<double>(frame.received_ns - frame.exposure_ns) * 1e-6},
+                            {"vision_ms", frame.processing_ms}});
         !s) {
       return ExecResult::failed(s.error().message);
     }

@@ -346,6 +346,7 @@ Frame to_frame(const cell_vision_Detections& d) {
   f.calibration = std::string(bus::str(d.calibration));
   f.processing_ms = d.processing_ms;
   f.received = Clock::now();
+  f.received_ns = wall_time_ns();
   for (const auto& item : bus::span(d.items)) {
     Located l;
     l.class_name = std::string(bus::str(item.class_name));
@@ -378,6 +379,10 @@ std::vector<Frame> Links::take_frames(const std::string& camera_id) {
     }
   }
   return out;
+}
+
+bool Links::wait_frames(std::chrono::milliseconds timeout) {
+  return images_.replies().wait_for_data(timeout);
 }
 
 Result<Frame> Links::locate(const std::string& camera_id, cell_vision_TriggerKind trigger,

@@ -105,6 +105,7 @@ struct Frame {
   std::string calibration;       ///< what mapped pixels to the robot
   double processing_ms = 0.0;
   Clock::time_point received{};
+  std::int64_t received_ns = 0;  ///< wall clock when it reached the task service
 };
 
 /// A Detections sample as a Frame (parts in the robot's base frame).
@@ -204,6 +205,9 @@ class Links {
   /// Every Detections of `camera_id` that arrived since the last call, whichever request (or
   /// none: a photocell-triggered camera's own frames) it answered. Non-blocking.
   std::vector<Frame> take_frames(const std::string& camera_id);
+  /// Blocks until a Detections sample (of any camera) is there to take, or `timeout`; true
+  /// when one is. Lets a job waiting for parts react to a frame at once instead of polling.
+  bool wait_frames(std::chrono::milliseconds timeout);
 
   /// Asks `camera_id` for one frame (now, or at the next photocell edge) and waits for the
   /// vision service's detections of exactly that frame. Errors: kProtocol naming what did not

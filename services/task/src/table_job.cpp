@@ -61,9 +61,12 @@ std::vector<double> to_std(const kinematics::JointVector& q) {
   return std::vector<double>(q.data(), q.data() + q.size());
 }
 
-/// Tool yaws for the pick and the place that leave the part at the slot's yaw: the part may be
-/// taken at any of its symmetric yaws, and the place turns by the same offset. The first
-/// combination both ends of which the robot reaches (seeded from the current joints) wins.
+/// Tool poses for the pick and the place that leave the part at the slot's yaw. The part is
+/// taken by its clear grasp styles in their order (the chapter: the first clear style wins;
+/// vision's clear-grip test, Located::grasps), or at its centre and own yaw when vision did
+/// not test the grip, each at any of its symmetric turns; the place turns and shifts the tool
+/// as the part must turn and shift onto the slot. The first combination both ends of which
+/// the robot reaches (seeded from the current joints) wins.
 struct Grip {
   Eigen::Isometry3d pick;
   Eigen::Isometry3d place;
@@ -72,22 +75,34 @@ std::optional<Grip> plan_grip(const kinematics::RobotModel& robot, const Located
                               double pick_z, const task::Slot& slot, double place_z,
                               int symmetry, const kinematics::JointVector& seed,
                               std::string& why) {
+  std::vector<Located::Grasp> styles = part.grasps;
+  if (styles.empty()) {
+    styles.push_back({-1, "centre", part.x_mm, part.y_mm, part.yaw_rad});
+  }
   const int n = symmetry <= 0 ? 1 : symmetry;
-  for (int k = 0; k < n; ++k) {
-    const double offset = 2 * std::numbers::pi * k / n;
-    Grip g{task::grasp_pose(robot, part.x_mm, part.y_mm, pick_z, part.yaw_rad + offset),
-           task::grasp_pose(robot, slot.x_mm, slot.y_mm, place_z, slot.yaw_rad + offset)};
-    auto q_pick = robot.inverse(g.pick, seed);
-    if (!q_pick) {
-      why = q_pick.error().message;
-      continue;
+  for (const Located::Grasp& style : styles) {
+    for (int k = 0; k < n; ++k) {
+      const double offset = 2 * std::numbers::pi * k / n;
+      // The part turns by slot - part yaw onto the slot; the grasp point turns with it.
+      const Eigen::Vector2d from_centre =
+          Eigen::Rotation2Dd(slot.yaw_rad - part.yaw_rad) *
+          Eigen::Vector2d(style.x_mm - part.x_mm, style.y_mm - part.y_mm);
+      const double tool_minus_part = style.yaw_rad - part.yaw_rad + offset;
+      Grip g{task::grasp_pose(robot, style.x_mm, style.y_mm, pick_z, style.yaw_rad + offset),
+             task::grasp_pose(robot, slot.x_mm + from_centre.x(), slot.y_mm + from_centre.y(),
+                              place_z, slot.yaw_rad + tool_minus_part)};
+      auto q_pick = robot.inverse(g.pick, seed);
+      if (!q_pick) {
+        why = q_pick.error().message;
+        continue;
+      }
+      auto q_place = robot.inverse(g.place, *q_pick);
+      if (!q_place) {
+        why = q_place.error().message;
+        continue;
+      }
+      return g;
     }
-    auto q_place = robot.inverse(g.place, *q_pick);
-    if (!q_place) {
-      why = q_place.error().message;
-      continue;
-    }
-    return g;
   }
   return std::nullopt;
 }
