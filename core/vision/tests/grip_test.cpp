@@ -235,6 +235,16 @@ GraspModel dip14_model() {
   return model;
 }
 
+/// The first detection of class `name` (nullptr when none).
+const Detection* first_of_class(const LocateResult& result, const std::string& name) {
+  for (const Detection& d : result.detections) {
+    if (d.class_name == name) {
+      return &d;
+    }
+  }
+  return nullptr;
+}
+
 // Rendered: a dip14 with a dip8 beside its long side, inside the "across" style's second
 // fingerprint: "across" is refused with the reason, "ends" is authorised. Then a third part at
 // one end blocks "ends" too.
@@ -275,12 +285,7 @@ TEST(ClearGrip, ANeighbourInsideOneFingerprintMovesTheGraspToTheNextStyle) {
     const auto result =
         locator->locate(frame.image, cell.mapper(cell.true_calibration(), frame.joints));
     ASSERT_TRUE(result);
-    const Detection* ic = nullptr;
-    for (const Detection& d : result->detections) {
-      if (d.class_name == "dip14") {
-        ic = &d;
-      }
-    }
+    const Detection* ic = first_of_class(*result, "dip14");
     ASSERT_NE(ic, nullptr) << frame.name;
     EXPECT_EQ(ic->grip.verdict, cases[k].verdict) << frame.name << ": " << ic->grip.detail;
     EXPECT_EQ(ic->grip.style, cases[k].style) << frame.name << ": " << ic->grip.detail;
@@ -324,12 +329,7 @@ TEST(ClearGrip, EveryClearStyleIsListedInTheBaseFrame) {
     const auto result =
         locator->locate(frame.image, cell.mapper(cell.true_calibration(), frame.joints));
     ASSERT_TRUE(result);
-    const Detection* ic = nullptr;
-    for (const Detection& d : result->detections) {
-      if (d.class_name == "dip14") {
-        ic = &d;
-      }
-    }
+    const Detection* ic = first_of_class(*result, "dip14");
     ASSERT_NE(ic, nullptr) << frame.name;
     ASSERT_TRUE(ic->has_base_pose) << frame.name;
     EXPECT_EQ(ic->grip.verdict, GripVerdict::kClear) << frame.name << ": " << ic->grip.detail;
