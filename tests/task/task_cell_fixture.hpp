@@ -62,7 +62,7 @@ class TaskCell : public ::testing::Test {
       if (child.running()) {
         const auto exit = child.stop(10s);
         if (!exit.exited || exit.code != 0) {
-          ADD_FAILURE() << name << " ended with " << exit.describe() << ":\n" << child.output();
+          ADD_FAILURE() << name << " ended with " << exit.describe() << ":\n" << output_of(name);
         }
       }
     }
@@ -93,6 +93,9 @@ class TaskCell : public ::testing::Test {
     options.executable = cell::testing::bin_path(exec);
     options.args = {"--config", config};
     options.env = env_;
+    // Each child's log in a file: a test of minutes (or task_bench's) never stalls a service
+    // on a full output pipe.
+    options.output_path = log_path(name);
     auto child = process::Child::spawn(options);
     EXPECT_TRUE(child) << child.error().message;
     children_.emplace_back(name, child ? std::move(*child) : process::Child());
@@ -127,15 +130,12 @@ class TaskCell : public ::testing::Test {
     return doc.contains("parts") ? doc["parts"] : json::array();
   }
 
+  std::string log_path(const std::string& name) const { return dir_ + "/" + name + ".log"; }
+
   /// Everything child `name` printed so far ("" when there is no such child).
   std::string output_of(const std::string& name) {
-    process::Child* c = child(name);
-    if (c == nullptr) {
-      return {};
-    }
-    std::string& drained = drained_[name];
-    (void)c->read_available(drained);
-    return c->output() + drained;
+    std::ifstream f(log_path(name));
+    return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   }
 
   std::string logs() {
@@ -151,7 +151,6 @@ class TaskCell : public ::testing::Test {
   std::string dir_;
   std::vector<std::string> env_;
   std::vector<std::pair<std::string, process::Child>> children_;
-  std::map<std::string, std::string> drained_;  ///< output read by output_of, per child
 };
 
 namespace cal = ::cell::calibration;

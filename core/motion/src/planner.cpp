@@ -286,13 +286,13 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
                              "robot can start ({:.0f} mm along it)",
                              target.max_travel_mm, speed * t_first)};
   }
-  Intercept best;
+  int candidates = 0;
   std::string last_failure;              // the last meeting point the robot cannot reach
   double late_s = -1.0;                  // how late at the last one it reaches (-1: none)
   double late_travel_mm = 0.0;
   // Plans the meeting at time t; true when the robot is there in time.
   auto meet_at = [&](double t, Intercept& out) {
-    ++best.candidates;
+    ++candidates;
     Eigen::Isometry3d pose = target.at_stamp;
     pose.pretranslate(target.velocity_mm_s * t);
     auto plan = track(q0, pose, cumulative, world_frame, speed_scale, target.joint_interpolated);
@@ -332,7 +332,7 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
           lo = mid;
         }
       }
-      found.candidates = best.candidates;
+      found.candidates = candidates;
       return found;
     }
     before = t;

@@ -118,18 +118,40 @@ Result<Child> Child::spawn(const SpawnOptions& options) {
   }
   envp.push_back(nullptr);
 
-  int out_pipe[2] = {-1, -1};
-  if (options.capture_output && pipe2(out_pipe, O_CLOEXEC) != 0) {
-    return Error{Errc::kIo, "pipe: " + errno_text(errno)};
+  const bool to_file = !options.output_path.empty();
+  const bool capture = options.capture_output && !to_file;
+  int out_file = -1;
+  if (to_file) {
+    out_file = ::open(options.output_path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC,
+                      0644);
+    if (out_file < 0) {
+      return Error{Errc::kIo,
+                   fmt::format("cannot open '{}' for the output of '{}': {}",
+                               options.output_path, exe, errno_text(errno))};
+    }
   }
+  // Closes what was opened so far when the start fails before the child runs.
+  int out_pipe[2] = {-1, -1};
   int exec_pipe[2] = {-1, -1};  // reports exec failure: closes on successful exec
+  auto fail = [&](const char* what) {
+    const int err = errno;
+    for (int fd : {out_file, out_pipe[0], out_pipe[1], exec_pipe[0], exec_pipe[1]}) {
+      if (fd >= 0) {
+        close(fd);
+      }
+    }
+    return Error{Errc::kIo, std::string(what) + ": " + errno_text(err)};
+  };
+  if (capture && pipe2(out_pipe, O_CLOEXEC) != 0) {
+    return fail("pipe");
+  }
   if (pipe2(exec_pipe, O_CLOEXEC) != 0) {
-    return Error{Errc::kIo, "pipe: " + errno_text(errno)};
+    return fail("pipe");
   }
   const pid_t parent = getpid();
   const pid_t pid = fork();
   if (pid < 0) {
-    return Error{Errc::kIo, "fork: " + errno_text(errno)};
+    return fail("fork");
   }
   if (pid == 0) {
     if (options.new_process_group) {
@@ -144,9 +166,12 @@ Result<Child> Child::spawn(const SpawnOptions& options) {
     sigset_t none;
     sigemptyset(&none);
     sigprocmask(SIG_SETMASK, &none, nullptr);  // launchers block signals; children must not
-    if (options.capture_output) {
+    if (capture) {
       dup2(out_pipe[1], STDOUT_FILENO);
       dup2(out_pipe[1], STDERR_FILENO);
+    } else if (to_file) {
+      dup2(out_file, STDOUT_FILENO);
+      dup2(out_file, STDERR_FILENO);
     }
     if (!options.working_dir.empty() && chdir(options.working_dir.c_str()) != 0) {
       const int err = errno;
@@ -168,12 +193,15 @@ Result<Child> Child::spawn(const SpawnOptions& options) {
     n = ::read(exec_pipe[0], &child_errno, sizeof child_errno);
   } while (n < 0 && errno == EINTR);
   close(exec_pipe[0]);
-  if (options.capture_output) {
+  if (capture) {
     close(out_pipe[1]);
+  }
+  if (out_file >= 0) {
+    close(out_file);
   }
   if (n == static_cast<ssize_t>(sizeof child_errno)) {
     waitpid(pid, nullptr, 0);
-    if (options.capture_output) {
+    if (capture) {
       close(out_pipe[0]);
     }
     return Error{Errc::kIo, fmt::format("cannot start '{}': {}", exe, errno_text(child_errno))};
@@ -181,7 +209,7 @@ Result<Child> Child::spawn(const SpawnOptions& options) {
   Child child;
   child.pid_ = pid;
   child.group_leader_ = options.new_process_group;
-  if (options.capture_output) {
+  if (capture) {
     child.output_fd_ = out_pipe[0];
     set_nonblocking_cloexec(child.output_fd_);
   }

@@ -2,6 +2,10 @@
 
 #include <signal.h>
 
+#include <cstdio>
+#include <fstream>
+#include <iterator>
+#include <optional>
 #include <thread>
 
 #include <gmock/gmock.h>
@@ -24,6 +28,39 @@ TEST(Child, CapturesOutputAndExitCode) {
   EXPECT_EQ(info->code, 3);
   EXPECT_THAT(child->output(), HasSubstr("out\n"));
   EXPECT_THAT(child->output(), HasSubstr("err\n"));
+}
+
+// A child that writes far more than a pipe holds (64 KiB) while nobody reads: with an output
+// file it runs to its end; the file has every byte, appended after what was there.
+TEST(Child, AnOutputFileNeverBlocksAChattyChild) {
+  const std::string path = ::testing::TempDir() + "/cell-child-output.log";
+  std::remove(path.c_str());
+  {
+    std::ofstream(path) << "before\n";
+  }
+  auto child = Child::spawn({.executable = "sh",
+                             .args = {"-c", "head -c 2000000 /dev/zero | tr '\\0' x; echo; "
+                                            "echo err >&2"},
+                             .output_path = path});
+  ASSERT_TRUE(child) << child.error().message;
+  EXPECT_EQ(child->output_fd(), -1);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  std::optional<ExitInfo> info;
+  while (!(info = child->poll()) && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // not reading anything
+  }
+  ASSERT_TRUE(info.has_value()) << "the child blocked on its output";
+  EXPECT_EQ(info->code, 0);
+  std::ifstream in(path);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(text.size(), 7U + 2000000U + 1U + 4U);
+  EXPECT_EQ(text.substr(0, 7), "before\n");
+  EXPECT_THAT(text, HasSubstr("err\n"));
+  EXPECT_TRUE(child->output().empty());
+  // A file that cannot be opened is refused at spawn, naming it.
+  EXPECT_THAT(Child::spawn({.executable = "true", .output_path = "/nonexistent/dir/out.log"}),
+              IsErrWith(Errc::kIo, "/nonexistent/dir/out.log"));
+  std::remove(path.c_str());
 }
 
 TEST(Child, ReportsAMissingExecutableAtSpawn) {

@@ -394,9 +394,6 @@ class ConveyorJob {
     };
     int symmetry = 1;
     const double z = grasp_z(part.class_name, symmetry);
-    // Among the part's symmetric yaws, the one whose roll joint is nearest its current value
-    // while staying a quarter turn inside its limits: rolls must not creep toward a limit
-    // pick after pick (a line that meets it would need a joint to jump).
     // The grasp: of the part's clear grasp styles (vision's clear-grip test; the part's own
     // yaw when it was not tested) and their symmetric turns, the one whose roll joint is
     // nearest its current value while staying a quarter turn inside its limits. On a fast
@@ -432,10 +429,10 @@ class ConveyorJob {
     r.meet_margin_s = kMeetMarginS;
     const double s_exposure = along(belt, at_exposure);
     r.meet_from_mm = spec_.upstream_mm - s_exposure;
-    // The grip's end (following the part through the dwell) inside the window too.
-    // The window's downstream end, or sooner where the arm's reach ends (on the belt's far
-    // side the reach ends before a window drawn along the centre line: following the part
-    // there would fault the robot).
+    // The grip's end (following the part through the dwell) inside the window too: the
+    // window's downstream end, or sooner where the arm's reach ends (on the belt's far side
+    // the reach ends before a window drawn along the centre line: following the part there
+    // would fault the robot).
     const double downstream = std::min(spec_.downstream_mm, reach_end(grasp, z, belt, now));
     r.meet_to_mm = downstream - speed * spec_.dwell_s - s_exposure;
     // Where the part is now (its frame may have waited in the queue while the arm was busy).
@@ -458,7 +455,6 @@ class ConveyorJob {
     }
     // The answer: accepted with the meeting point, or refused (no point of the window can be
     // met in time: outside the window; anything else failed).
-    std::int64_t accepted_ns = 0;  // wall clock when the motion service took the track
     std::optional<Links::MotionUpdate> first;
     const auto answer_by = Clock::now() + 2000ms;
     while (!first && Clock::now() < answer_by) {
@@ -489,7 +485,7 @@ class ConveyorJob {
                              : "the motion service gave no meeting point for the track");
       return recover_after_stop();
     }
-    accepted_ns = wall_time_ns();
+    const std::int64_t accepted_ns = wall_time_ns();  // the motion service took the track
     const double lead_mm = (first->meet_target.translation() - at_exposure).dot(belt.direction);
     const double s_meet = s_exposure + lead_mm;
     const Eigen::Vector3d lead = belt.direction * lead_mm;
@@ -648,8 +644,7 @@ class ConveyorJob {
                     {"stage", "depart"}};
     // Exposure -> the tracking motion under way (the motion service planned it and handed it
     // to the gateway): the chapter's stage-1 latency (bench/task).
-    const double exposure_to_track_ms =
-        accepted_ns > 0 ? static_cast<double>(accepted_ns - frame.exposure_ns) * 1e-6 : -1.0;
+    const double exposure_to_track_ms = static_cast<double>(accepted_ns - frame.exposure_ns) * 1e-6;
     if (auto s = run_.step("gripped",
                            {{"class", part.class_name},
                             {"exposure_to_track_ms", exposure_to_track_ms},

@@ -19,6 +19,10 @@ struct SpawnOptions {
                                          ///< (a later entry for a key wins)
   std::string working_dir;               ///< empty: inherit
   bool capture_output = true;            ///< stdout+stderr into one pipe (read via output_fd)
+  /// When not empty: stdout+stderr appended to this file instead of a pipe (capture_output is
+  /// then ignored, output() stays empty). A long run then never stalls on a full pipe that
+  /// nobody read (64 KiB of log lines block a child's next write).
+  std::string output_path;
   bool new_process_group = true;         ///< child leads its own group (signals reach its tree)
   bool die_with_parent = true;           ///< PR_SET_PDEATHSIG(SIGTERM): no orphan if we die
 };
