@@ -4,7 +4,7 @@
 //  - the table job: 15 ICs of the thesis's table, picks per minute;
 //  - the belt at 0.5 m/s: picks per minute at a part every 2 s and every 1.2 s, and the time
 //    from the exposure to the tracking motion under way (the chapter's major cycle: 16 ms);
-//  - the belt at 2 m/s, the same (the issue asks 95% picked there: measured, not asserted).
+//  - the belt at 2 m/s, the same (tests/task asserts the issue's 95 %; here it is measured).
 // Calibrations are the simulator's truth (the subject is the task service). Run:
 //   build/bin/task_bench            (about 5 minutes)      build/bin/task_bench --quick
 //   build/bin/task_bench --only belt-20-2   (one measure: accept, table, belt-05-2, belt-05-12,
@@ -75,7 +75,8 @@ class TaskBench : public TaskCellTest {
     json counters;
     double elapsed_s = 0;
     Stats latency;        ///< exposure -> the tracking motion accepted
-    Stats frame_latency;  ///< exposure -> the located parts at the task service
+    Stats frame_latency;  ///< exposure -> the located parts taken by the task service
+    Stats vision;         ///< the vision service's time on the frame
   };
 
   BeltRun belt_run(const std::string& id, double speed, double period, double duration_s,
@@ -110,6 +111,7 @@ class TaskBench : public TaskCellTest {
     }
     r.latency = gripped_field(dir_ + "/journal.sqlite", id, "exposure_to_track_ms");
     r.frame_latency = gripped_field(dir_ + "/journal.sqlite", id, "exposure_to_frame_ms");
+    r.vision = gripped_field(dir_ + "/journal.sqlite", id, "vision_ms");
     std::map<std::string, int> why;
     for (const json& p : status.value("parts", json::array())) {
       const std::string d = p.value("detail", "");
@@ -220,9 +222,13 @@ TEST_F(TaskBench, Table) {
                 "[ms] | %.1f / %.1f / %.1f (n = %zu) | the chapter's major cycle 16 ms |\n",
                 r.speed / 1000, r.latency.q(0.5), r.latency.q(0.9), r.latency.q(1.0),
                 r.latency.v.size());
-    std::printf("| ... of which exposure -> located parts at the task (render, image, vision), "
-                "median / p90 [ms] | %.1f / %.1f | - |\n",
+    std::printf("| ... of which exposure -> located parts taken by the task (render, image, "
+                "vision; and the queue while the arm is busy), median / p90 [ms] | %.1f / %.1f "
+                "| - |\n",
                 r.frame_latency.q(0.5), r.frame_latency.q(0.9));
+    std::printf("| ... of which the vision service's locate (1024 x 1024), median / p90 [ms] | "
+                "%.1f / %.1f | - |\n",
+                r.vision.q(0.5), r.vision.q(0.9));
   }
   std::printf("task_bench: done\n");
 }

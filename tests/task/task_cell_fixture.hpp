@@ -69,6 +69,12 @@ class TaskCell : public ::testing::Test {
     if (HasFailure()) {
       std::printf("%s", logs().c_str());
     }
+    // CELL_TEST_KEEP=1 keeps the test's directory: every child's log (<name>.log), the
+    // journal, the configs.
+    if (const char* keep = std::getenv("CELL_TEST_KEEP"); keep != nullptr && *keep == '1') {
+      std::printf("kept %s\n", dir_.c_str());
+      return;
+    }
     std::error_code ec;
     std::filesystem::remove_all(dir_, ec);
   }
