@@ -65,6 +65,11 @@ struct DriverInfo {
   std::string name;
   int dof = 0;
   std::chrono::nanoseconds cycle{std::chrono::milliseconds(1)};
+  /// How far after the cycle's instant the setpoint written then is held by the arm: the
+  /// host samples the path that far ahead, so the arm is on the path when read, not behind
+  /// it (the ideal robot: one cycle; a controller that takes its setpoint as the reference of
+  /// its own loop at once: 0).
+  std::chrono::nanoseconds setpoint_lead{0};
 };
 
 /// One controller: the 7545 servo board (DPR), the Excalibur (RS-232 ASCII), a simulator of

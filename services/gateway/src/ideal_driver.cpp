@@ -2,8 +2,6 @@
 
 #include <fmt/format.h>
 
-#include <algorithm>
-
 namespace cell::gateway {
 
 IdealDriver::IdealDriver(int dof, JointVector initial_q, double gripper_time_s,
@@ -12,6 +10,9 @@ IdealDriver::IdealDriver(int dof, JointVector initial_q, double gripper_time_s,
   info_.name = "ideal";
   info_.dof = dof;
   info_.cycle = cycle;
+  // The arm holds each setpoint from the next cycle on: the host samples its path one cycle
+  // ahead, so at every read the arm is on the path (2 mm behind it at 2 m/s otherwise).
+  info_.setpoint_lead = cycle;
 }
 
 Status IdealDriver::on_configure() { return ok_status(); }
@@ -26,14 +27,7 @@ CycleStatus IdealDriver::read(Clock::time_point now, JointState& state) {
     gripper_ = gripper_ == cell_robot_GRIPPER_CLOSING ? cell_robot_GRIPPER_CLOSED
                                                       : cell_robot_GRIPPER_OPEN;
   }
-  // Where the arm is now: the last setpoint carried on at its velocity (the arm follows the
-  // path between setpoints; without it the arm would be a whole cycle behind the setpoint
-  // it was given, 2 mm at 2 m/s of belt tracking). At most two cycles on: a host that
-  // stalled does not fling the ideal arm along.
-  const double since_s = std::clamp(
-      std::chrono::duration<double>(now - written_at_).count(), 0.0,
-      2.0 * std::chrono::duration<double>(info_.cycle).count());
-  state.q = written_at_ == Clock::time_point{} ? q_ : JointVector(q_ + qd_ * since_s);
+  state.q = q_;
   state.qd = qd_;
   state.effort = JointVector::Zero(q_.size());
   state.gripper = gripper_;
@@ -43,10 +37,9 @@ CycleStatus IdealDriver::read(Clock::time_point now, JointState& state) {
   return CycleStatus::kOk;
 }
 
-CycleStatus IdealDriver::write(Clock::time_point now, const JointSetpoint& setpoint) {
+CycleStatus IdealDriver::write(Clock::time_point /*now*/, const JointSetpoint& setpoint) {
   q_ = setpoint.q;
   qd_ = setpoint.qd;
-  written_at_ = now;
   return CycleStatus::kOk;
 }
 

@@ -5,9 +5,9 @@
 
 namespace cell::gateway {
 
-/// The ideal robot: it follows its setpoints exactly (no dynamics, no faults): read() gives
-/// the last setpoint carried on at its velocity to the read's instant (a first-order hold),
-/// so the arm is where the path says at every read, not one cycle behind it. It
+/// The ideal robot: its joints are exactly the last setpoint (no dynamics, no faults), held
+/// from the next cycle on: its DriverInfo::setpoint_lead is one cycle, so the host writes the
+/// path's point for the next cycle and the arm is on the path at every read. It
 /// stands in for a controller in tests and in the simulated cell where nothing else is
 /// modelled; the gripper opens or closes after `gripper_time_s`; homing moves nothing and
 /// only marks the robot homed (its joints start where configured).
@@ -35,7 +35,6 @@ class IdealDriver final : public RobotDriver {
   cell_robot_GripperState gripper_ = cell_robot_GRIPPER_OPEN;
   Clock::time_point gripper_done_{};
   Clock::time_point last_now_{};
-  Clock::time_point written_at_{};  ///< the last write()'s instant (epoch: none yet)
   bool homed_ = false;
 };
 

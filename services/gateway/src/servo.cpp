@@ -379,8 +379,9 @@ void Servo::cycle(Clock::time_point now) {
     retries_in_a_row_ = 0;
   }
 
-  // Next setpoint.
-  const trajectory::ExecState state = executor_.step(t, sample_);
+  // Next setpoint: the path where the arm is to hold it (the driver's setpoint lead ahead).
+  const trajectory::ExecState state = executor_.step(
+      t + std::chrono::duration<double>(driver_->info().setpoint_lead).count(), sample_);
   if (state != trajectory::ExecState::kIdle) {
     setpoint_.q = sample_.q;
     setpoint_.qd = sample_.qd;

@@ -156,6 +156,52 @@ TEST_F(ServoTest, IdealRobotRefusesUntilHomedThenFollowsExactly) {
   EXPECT_THAT(s.base_T_tool, ::cell::testing::IsNearPose(*model_.forward(plan->trajectory.end()), 1e-9));
 }
 
+// A move that ends on a joint's limit: at every read the ideal arm is on the path sampled at
+// that instant (the host writes the point one setpoint_lead ahead), and never past the end,
+// so the next move does not start beyond the limit (an extrapolating arm overshot theta4's
+// 180 deg by a hair and the next move was refused).
+TEST_F(ServoTest, IdealRobotIsOnThePathAtEveryReadAndNeverPastTheLimitItEndsOn) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, deg(90)});
+  const kinematics::JointSpec& wrist = model_.joints()[3];
+  const JointVector goal = jv({deg(60), deg(90), 100, wrist.upper});
+  Servo servo(model_, std::make_unique<IdealDriver>(4, q0, 0.5, 1ms), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_HOME, {}), IsOk());
+  servo.cycle(now_ += 1ms);
+  auto plan = planner_.move_joints(q0, goal, 1.0);
+  ASSERT_THAT(plan, IsOk());
+  ASSERT_THAT(servo.post_trajectory(*plan, "to-limit"), IsOk());
+  double worst_off_path = 0.0;
+  int reads = 0;
+  bool started = false;
+  for (int i = 0; i < 20000; ++i) {
+    servo.cycle(now_ += 1ms);
+    const ServoSnapshot s = servo.snapshot();
+    EXPECT_LE(s.measured.q[3], wrist.upper) << "read " << i;
+    if (s.moving) {
+      started = true;
+      // progress is the fraction of the path's time the setpoint written this cycle is at;
+      // the arm read this cycle holds the previous cycle's setpoint, one lead behind it.
+      const double t_read = s.progress * plan->trajectory.duration_s() - 0.001;
+      if (t_read > 0.0) {
+        worst_off_path = std::max(
+            worst_off_path,
+            (s.measured.q - plan->trajectory.sample(t_read).q).cwiseAbs().maxCoeff());
+        ++reads;
+      }
+    } else if (started) {
+      break;
+    }
+  }
+  ASSERT_TRUE(started);
+  EXPECT_GT(reads, 100);
+  EXPECT_LT(worst_off_path, 1e-9);
+  for (int i = 0; i < 3; ++i) {  // held there, cycle after cycle
+    servo.cycle(now_ += 1ms);
+    EXPECT_TRUE(servo.snapshot().measured.q.isApprox(goal, 1e-12));
+  }
+}
+
 /// A controller whose homing, like the 7545's find_home(), re-zeroes its counters and reports
 /// done while the arm still coasts a little past the index; its home is every joint at 0.
 class HomingDriver final : public RobotDriver {
