@@ -15,6 +15,7 @@ namespace cell::vision {
 namespace {
 
 using testing::Cell;
+using testing::dip14_grasp_model;
 using ::testing::HasSubstr;
 using testing::Lights;
 
@@ -223,18 +224,6 @@ TEST(Fingerprints, ModelsAreValidated) {
   EXPECT_THAT(s.error().message, HasSubstr("at least one grasp style"));
 }
 
-/// A dip14 and its two styles: "across" (fingers on the long sides, over the leads) and "ends".
-GraspModel dip14_model() {
-  GraspModel model;
-  model.class_name = "dip14";
-  model.finger_width_mm = 3.0;
-  model.finger_height_mm = 8.0;
-  model.area_tolerance_px = 4.0;
-  model.styles = {GraspStyle{"across", 0.0, 0.0, 90.0 * kDeg, 9.0},
-                  GraspStyle{"ends", 0.0, 0.0, 0.0, 21.0}};
-  return model;
-}
-
 /// The first detection of class `name` (nullptr when none).
 const Detection* first_of_class(const LocateResult& result, const std::string& name) {
   for (const Detection& d : result.detections) {
@@ -251,7 +240,7 @@ const Detection* first_of_class(const LocateResult& result, const std::string& n
 TEST(ClearGrip, ANeighbourInsideOneFingerprintMovesTheGraspToTheNextStyle) {
   const Cell& cell = Cell::get();
   LocateOptions options;
-  options.grasps = {dip14_model()};
+  options.grasps = {dip14_grasp_model()};
   auto locator = Locator::create(options);
   ASSERT_TRUE(locator) << locator.error().message;
   const Eigen::Vector2d c = cell.window(30.0).center();
@@ -312,19 +301,13 @@ TEST(ClearGrip, ANeighbourInsideOneFingerprintMovesTheGraspToTheNextStyle) {
 TEST(ClearGrip, EveryClearStyleIsListedInTheBaseFrame) {
   const Cell& cell = Cell::get();
   LocateOptions options;
-  options.grasps = {dip14_model()};
+  options.grasps = {dip14_grasp_model()};
   auto locator = Locator::create(options);
   ASSERT_TRUE(locator) << locator.error().message;
-  const Eigen::Vector2d c = cell.window(30.0).center();
-  const double yaw = 25.0 * kDeg;
-  const Eigen::Vector2d n1 = c + 9.5 * Eigen::Vector2d(-std::sin(yaw), std::cos(yaw));
-  const std::vector<std::vector<render::Part>> scenes = {
-      {cell.part("ic", "dip14", c.x(), c.y(), yaw, true)},
-      {cell.part("ic", "dip14", c.x(), c.y(), yaw, true),
-       cell.part("n1", "dip8", n1.x(), n1.y(), yaw, true)}};
-  const std::vector<std::vector<std::string>> expected = {{"across", "ends"}, {"ends"}};
+  const auto scenes = cell.clear_grasp_scenes();
   for (std::size_t k = 0; k < scenes.size(); ++k) {
-    const auto frame = cell.render(fmt::format("clear grasps {}", k), scenes[k],
+    const std::vector<std::string>& expected = scenes[k].clear;
+    const auto frame = cell.render(fmt::format("clear grasps {}", k), scenes[k].parts,
                                    cell.aligned_joints(), Lights::kTubes, 40 + k);
     const auto result =
         locator->locate(frame.image, cell.mapper(cell.true_calibration(), frame.joints));
@@ -334,13 +317,13 @@ TEST(ClearGrip, EveryClearStyleIsListedInTheBaseFrame) {
     ASSERT_TRUE(ic->has_base_pose) << frame.name;
     EXPECT_EQ(ic->grip.verdict, GripVerdict::kClear) << frame.name << ": " << ic->grip.detail;
     EXPECT_EQ(ic->grip.style, k == 0 ? 0 : 1) << frame.name;
-    EXPECT_EQ(ic->grip.style_name, expected[k][0]) << frame.name;
-    ASSERT_EQ(ic->grip.clear.size(), expected[k].size()) << frame.name << ": " << ic->grip.detail;
-    ASSERT_EQ(ic->base_grasps.size(), expected[k].size()) << frame.name;
-    for (std::size_t i = 0; i < expected[k].size(); ++i) {
+    EXPECT_EQ(ic->grip.style_name, expected[0]) << frame.name;
+    ASSERT_EQ(ic->grip.clear.size(), expected.size()) << frame.name << ": " << ic->grip.detail;
+    ASSERT_EQ(ic->base_grasps.size(), expected.size()) << frame.name;
+    for (std::size_t i = 0; i < expected.size(); ++i) {
       const ClearGrasp& g = ic->grip.clear[i];
       const BaseGrasp& b = ic->base_grasps[i];
-      EXPECT_EQ(g.name, expected[k][i]) << frame.name;
+      EXPECT_EQ(g.name, expected[i]) << frame.name;
       EXPECT_EQ(b.name, g.name) << frame.name;
       EXPECT_EQ(b.style, g.style) << frame.name;
       EXPECT_EQ(g.style, g.name == "across" ? 0 : 1) << frame.name;

@@ -170,6 +170,27 @@ render::Part Cell::part(const std::string& id,
   return part(id, *cls, pose, pins);
 }
 
+std::vector<Cell::ClearGraspScene> Cell::clear_grasp_scenes() const {
+  const Eigen::Vector2d c = window(30.0).center();
+  const double yaw = 25.0 * std::numbers::pi / 180.0;
+  const Eigen::Vector2d n1 = c + 9.5 * Eigen::Vector2d(-std::sin(yaw), std::cos(yaw));
+  return {{{part("ic", "dip14", c.x(), c.y(), yaw, true)}, {"across", "ends"}},
+          {{part("ic", "dip14", c.x(), c.y(), yaw, true),
+            part("n1", "dip8", n1.x(), n1.y(), yaw, true)},
+           {"ends"}}};
+}
+
+GraspModel dip14_grasp_model() {
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  GraspModel model;
+  model.class_name = "dip14";
+  model.finger_width_mm = 3.0;
+  model.finger_height_mm = 8.0;
+  model.styles = {GraspStyle{"across", 0.0, 0.0, 90.0 * kDeg, 9.0},
+                  GraspStyle{"ends", 0.0, 0.0, 0.0, 21.0}};
+  return model;
+}
+
 calibration::CameraCalibration Cell::ideal_calibration() const {
   calibration::CameraCalibration c = true_;
   c.pinhole.distortion = render::Distortion{};

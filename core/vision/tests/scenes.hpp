@@ -11,6 +11,7 @@
 #include "cell/render/camera_file.hpp"
 #include "cell/render/scene.hpp"
 #include "cell/render/truth.hpp"
+#include "cell/vision/grip.hpp"
 #include "cell/vision/locate.hpp"
 #include "cell/vision/pixel_mapper.hpp"
 #include "cell/world/part_class.hpp"
@@ -101,6 +102,15 @@ class Cell {
   /// config/scenes/table_ics.yaml (the thesis's 15 ICs) at the grab pose.
   RenderedScene table_ics(bool pins, Lights lights) const;
 
+  /// A rendered clear-grip case and the styles that stay clear in it, best first.
+  struct ClearGraspScene {
+    std::vector<render::Part> parts;
+    std::vector<std::string> clear;
+  };
+  /// A dip14 at 25 deg in the window's centre, alone (both dip14_grasp_model() styles clear),
+  /// then with a dip8 9.5 mm off its long side, inside the "across" fingerprint ("ends" only).
+  std::vector<ClearGraspScene> clear_grasp_scenes() const;
+
   /// A mapper for a frame with the given calibration.
   PixelMapper mapper(const calibration::CameraCalibration& calibration,
                      const std::vector<double>& joints) const;
@@ -147,5 +157,9 @@ Score score(const std::vector<Detection>& detections,
             const RenderedScene& frame,
             bool compare_class,
             const Eigen::Isometry3d* world_T_base = nullptr);
+
+/// A dip14 and its two styles: "across" (fingers on the long sides, over the leads; the tool
+/// along the part) and "ends" (the tool across it).
+GraspModel dip14_grasp_model();
 
 }  // namespace cell::vision::testing

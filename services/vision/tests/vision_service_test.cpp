@@ -385,29 +385,17 @@ TEST_F(VisionServiceTest, MalformedImagesGetAnErrorAndTheServiceKeepsServing) {
 TEST_F(VisionServiceTest, DetectionsListEveryClearGraspInTheBaseFrame) {
   constexpr double kDeg = std::numbers::pi / 180.0;
   VisionConfig config = test_config();
-  GraspModel dip14;
-  dip14.class_name = "dip14";
-  dip14.finger_width_mm = 3.0;
-  dip14.finger_height_mm = 8.0;
-  dip14.styles = {GraspStyle{"across", 0.0, 0.0, 90.0 * kDeg, 9.0},
-                  GraspStyle{"ends", 0.0, 0.0, 0.0, 21.0}};
-  config.locate.grasps = {dip14};
+  config.locate.grasps = {vision::testing::dip14_grasp_model()};
   start(config);
   const Cell& cell = Cell::get();
-  const Eigen::Vector2d c = cell.window(30.0).center();
-  const double yaw = 25.0 * kDeg;
-  const Eigen::Vector2d n1 = c + 9.5 * Eigen::Vector2d(-std::sin(yaw), std::cos(yaw));
-  const std::vector<std::vector<render::Part>> scenes = {
-      {cell.part("ic", "dip14", c.x(), c.y(), yaw, true)},
-      {cell.part("ic", "dip14", c.x(), c.y(), yaw, true),
-       cell.part("n1", "dip8", n1.x(), n1.y(), yaw, true)}};
-  const std::vector<std::vector<std::string>> expected = {{"across", "ends"}, {"ends"}};
+  const auto scenes = cell.clear_grasp_scenes();
   for (std::size_t k = 0; k < scenes.size(); ++k) {
-    const auto frame = cell.render(fmt::format("grasps {}", k), scenes[k], cell.aligned_joints(),
-                                   Lights::kTubes, 50 + k);
+    const std::vector<std::string>& expected = scenes[k].clear;
+    const auto frame = cell.render(fmt::format("grasps {}", k), scenes[k].parts,
+                                   cell.aligned_joints(), Lights::kTubes, 50 + k);
     auto d = peer_->detections_of(peer_->publish(frame.image, frame.joints));
     ASSERT_TRUE(d);
-    ASSERT_EQ(bus::span(d->get().items).size(), scenes[k].size());
+    ASSERT_EQ(bus::span(d->get().items).size(), scenes[k].parts.size());
     for (const auto& item : bus::span(d->get().items)) {
       const auto grasps = bus::span(item.clear_grasps);
       if (bus::str(item.class_name) != "dip14") {
@@ -418,13 +406,13 @@ TEST_F(VisionServiceTest, DetectionsListEveryClearGraspInTheBaseFrame) {
       ASSERT_TRUE(item.has_base_pose);
       EXPECT_EQ(item.grip, cell_vision_GRIP_CLEAR) << bus::str(item.grip_detail);
       EXPECT_EQ(item.grip_style, k == 0 ? 0 : 1);
-      ASSERT_EQ(grasps.size(), expected[k].size()) << bus::str(item.grip_detail);
+      ASSERT_EQ(grasps.size(), expected.size()) << bus::str(item.grip_detail);
       EXPECT_EQ(grasps[0].style, item.grip_style);
       for (std::size_t i = 0; i < grasps.size(); ++i) {
         const auto& g = grasps[i];
-        EXPECT_EQ(bus::str(g.name), expected[k][i]);
-        EXPECT_EQ(g.style, expected[k][i] == "across" ? 0 : 1);
-        const double turn = expected[k][i] == "across" ? 0.0 : -90.0 * kDeg;
+        EXPECT_EQ(bus::str(g.name), expected[i]);
+        EXPECT_EQ(g.style, expected[i] == "across" ? 0 : 1);
+        const double turn = expected[i] == "across" ? 0.0 : -90.0 * kDeg;
         EXPECT_NEAR(g.base_pose.x_mm, item.base_pose.x_mm, 1e-9);
         EXPECT_NEAR(g.base_pose.y_mm, item.base_pose.y_mm, 1e-9);
         EXPECT_NEAR(angle_error(g.base_pose.rz_rad, item.base_pose.rz_rad + turn, 2), 0.0, 1e-9)
