@@ -59,6 +59,12 @@ void TrajectoryExecutor::stop() noexcept {
   state_ = has_last_ ? ExecState::kArrived : ExecState::kIdle;
 }
 
+void TrajectoryExecutor::clear() noexcept {
+  alter_enabled_ = false;
+  has_last_ = false;
+  state_ = ExecState::kIdle;
+}
+
 double TrajectoryExecutor::progress() const noexcept {
   const double d = trajectory_.duration_s();
   if (d <= 0) {

@@ -104,6 +104,7 @@ Dpr7545Driver::Dpr7545Driver(const kinematics::RobotModel& model, Dpr7545Options
   info_.name = "dpr7545";
   info_.dof = kJoints;
   info_.cycle = cycle;
+  info_.max_setpoint_advance = 2 * cycle;  // a late cycle catches up one period, no more
   // Map the model's joint conventions onto the 7545's counters (J1, J2 counterclockwise, Z
   // down, R clockwise positive).
   const kinematics::ScaraModel* scara = model_.scara();

@@ -70,6 +70,12 @@ struct DriverInfo {
   /// it (the ideal robot: one cycle; a controller that takes its setpoint as the reference of
   /// its own loop at once: 0).
   std::chrono::nanoseconds setpoint_lead{0};
+  /// The most a setpoint may move along its path from one cycle to the next, in path time
+  /// (0: no bound, the path follows the wall clock). A host that stalls Δ would otherwise
+  /// jump the setpoint Δ × speed at once: on the 7545's board (45 deg/s of J1 = 39 counts a
+  /// millisecond, its torque word overflowing near 30 counts of error) a 5 ms stall is a
+  /// torque fault. Bounded, the path slows down through a stall and ends that much later.
+  std::chrono::nanoseconds max_setpoint_advance{0};
 };
 
 /// One controller: the 7545 servo board (DPR), the Excalibur (RS-232 ASCII), a simulator of

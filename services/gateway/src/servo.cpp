@@ -275,8 +275,11 @@ void Servo::apply_commands(
         status = driver_->command(DriverCommand::kReset, args);
         if (status) {
           // After a fault or stop the arm may rest elsewhere than the last setpoint (a move
-          // not achieved, a drift): hold where it is, so the next plan (made from the measured
-          // joints) starts here.
+          // not achieved, a drift, a servo board that let go): hold where it is, so the next
+          // plan (made from the measured joints) starts here. The executor holds nothing
+          // more (its hold was the last setpoint: 281 counts off on the 7545 after a torque
+          // fault, which faulted it again the cycle after the reset).
+          executor_.clear();
           setpoint_.q = measured_.q;
           setpoint_.qd.setZero();
           mode_ = cell_robot_MODE_IDLE;
@@ -312,6 +315,7 @@ void Servo::apply_commands(
       case cell_robot_CMD_SET_MODE:
         status = driver_->command(DriverCommand::kSetMode, args);
         if (status) {  // back from manual or teach: the arm is wherever the operator left it
+          executor_.clear();
           setpoint_.q = measured_.q;
           setpoint_.qd.setZero();
         }
@@ -333,6 +337,18 @@ void Servo::apply_commands(
 
 void Servo::cycle(Clock::time_point now) {
   const double t = seconds(now);
+  // A late cycle (the host stalled, or the controller's handshake did): the path moves on at
+  // most max_setpoint_advance, the rest of the stall delays it (DriverInfo).
+  const double max_advance =
+      std::chrono::duration<double>(driver_->info().max_setpoint_advance).count();
+  if (max_advance > 0.0 && last_cycle_s_ >= 0.0 && t - last_cycle_s_ > max_advance) {
+    const double excess = t - last_cycle_s_ - max_advance;
+    executor_.delay(excess);
+    if (mode_ == cell_robot_MODE_MOVING) {
+      path_delay_s_ += excess;
+    }
+  }
+  last_cycle_s_ = t;
   Pending pending;
   {
     std::lock_guard lock(mutex_);
@@ -466,6 +482,7 @@ void Servo::cycle(Clock::time_point now) {
   snapshot_.stamp_ns = read_ns;
   snapshot_.jitter_max_us = jitter_max_us_;
   snapshot_.overruns = overruns_;
+  snapshot_.path_delay_s = path_delay_s_;
 }
 
 void Servo::reset_jitter() noexcept {

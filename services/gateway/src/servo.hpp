@@ -42,6 +42,9 @@ struct ServoSnapshot {
   std::int64_t stamp_ns = 0;
   double jitter_max_us = 0.0;
   std::uint64_t overruns = 0;
+  /// Path time given up to late cycles so far [s] (DriverInfo::max_setpoint_advance): how
+  /// much later than planned the moves ended because the host stalled.
+  double path_delay_s = 0.0;
 };
 
 /// Something the operator should hear about (becomes a CellEvent).
@@ -134,6 +137,8 @@ class Servo {
   std::string stop_text_;
   std::uint64_t cycle_ = 0;
   int retries_in_a_row_ = 0;
+  double last_cycle_s_ = -1.0;  ///< the previous cycle's instant [s since epoch_] (-1: none)
+  double path_delay_s_ = 0.0;   ///< ServoSnapshot::path_delay_s
 
   // Guards pending_, snapshot_, events_out_. Shared by the servo thread (SCHED_FIFO) and the
   // bus threads: priority inheritance bounds how long the servo thread can wait for it.

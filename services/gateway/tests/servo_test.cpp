@@ -51,9 +51,14 @@ class FakeDriver final : public RobotDriver {
   }
   CycleStatus write(Clock::time_point, const JointSetpoint& sp) override {
     q_ = sp.q;
+    last_written = sp.q;
     ++writes;
     return CycleStatus::kOk;
   }
+  /// The arm comes to rest at `q` on its own (a board that let go of it in a fault).
+  void rest_at(JointVector q) { q_ = std::move(q); }
+  /// As the 7545's board: the setpoint moves at most `d` of path time a cycle.
+  void bound_advance(std::chrono::nanoseconds d) { info_.max_setpoint_advance = d; }
   Status command(DriverCommand c, const CommandArgs&) override {
     commands.push_back(c);
     if (c == DriverCommand::kReset) {
@@ -83,6 +88,7 @@ class FakeDriver final : public RobotDriver {
   cell_robot_GripperState gripper = cell_robot_GRIPPER_OPEN;
   std::vector<DriverCommand> commands;
   int writes = 0;
+  JointVector last_written;
 
  private:
   DriverInfo info_;
@@ -328,6 +334,73 @@ TEST_F(ServoTest, ControllerFaultStopsMotionIsReportedAndCleared) {
   ASSERT_THAT(servo.post_command(cell_robot_CMD_RESET, {}), IsOk());
   servo.cycle(now_ += 1ms);
   EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_IDLE);
+}
+
+// A fault mid-move, after which the arm rests elsewhere than its last setpoint (the 7545's
+// board lets go of a joint whose torque word overflowed): once reset, the servo holds the arm
+// where it is, cycle after cycle, instead of driving it back to the old setpoint (on the
+// simulated 7545 that was a 281-count jump and a second torque fault at once).
+TEST_F(ServoTest, AfterAResetTheArmIsHeldWhereItRestsNotWhereItWasLastSent) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  auto driver = std::make_unique<FakeDriver>(q0);
+  FakeDriver* fake = driver.get();
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  ASSERT_THAT(servo.post_trajectory(*planner_.move_joints(q0, jv({deg(90), deg(45), 200, 0}), 1.0),
+                                    "t"),
+              IsOk());
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.progress > 0.3; }, 10));
+  fake->fault_bits = 0x0100;
+  servo.cycle(now_ += 1ms);
+  ASSERT_EQ(servo.snapshot().mode, cell_robot_MODE_FAULT);
+  const JointVector sent = fake->last_written;
+  JointVector rest = sent;
+  rest[0] += deg(3);  // coasted 2600 counts of J1 on
+  fake->rest_at(rest);
+  servo.cycle(now_ += 1ms);
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_RESET, {}), IsOk());
+  for (int i = 0; i < 5; ++i) {
+    servo.cycle(now_ += 1ms);
+    EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_IDLE) << "cycle " << i;
+    EXPECT_TRUE(fake->last_written.isApprox(rest, 1e-12))
+        << "cycle " << i << ": wrote J1 " << fake->last_written[0] << " rad, the arm rests at "
+        << rest[0] << " rad";
+  }
+  // The next move starts where the arm rests.
+  EXPECT_THAT(servo.post_trajectory(*planner_.move_joints(rest, q0, 1.0), "back"), IsOk());
+}
+
+// A host stall of 20 ms in the middle of a move: with the advance bounded to 2 ms (the 7545),
+// the path moves on 2 ms and the rest of the stall delays it (no jump of 20 ms x speed, a
+// torque fault on the board); unbounded (the ideal arm), the path keeps to the wall clock.
+TEST_F(ServoTest, AStalledCycleDelaysThePathWhenTheControllerBoundsItsAdvance) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  for (const bool bounded : {true, false}) {
+    auto driver = std::make_unique<FakeDriver>(q0);
+    FakeDriver* fake = driver.get();
+    if (bounded) {
+      fake->bound_advance(2ms);
+    }
+    Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+    ASSERT_THAT(servo.start(now_), IsOk());
+    auto plan = planner_.move_joints(q0, jv({deg(90), deg(45), 200, 0}), 1.0);
+    ASSERT_THAT(plan, IsOk());
+    const double d = plan->trajectory.duration_s();
+    ASSERT_THAT(servo.post_trajectory(*plan, "t"), IsOk());
+    ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.progress > 0.4; }, 10));
+    const double before_s = servo.snapshot().progress * d;
+    servo.cycle(now_ += 20ms);
+    const ServoSnapshot s = servo.snapshot();
+    const double advanced_s = s.progress * d - before_s;
+    EXPECT_NEAR(advanced_s, bounded ? 0.002 : 0.020, 1e-9) << (bounded ? "bounded" : "free");
+    EXPECT_NEAR(s.path_delay_s, bounded ? 0.018 : 0.0, 1e-9);
+    EXPECT_TRUE(fake->last_written.isApprox(plan->trajectory.sample(before_s + advanced_s).q,
+                                            1e-9));
+    // The move still ends where it was going, that much later.
+    ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& x) { return !x.moving; }, 10));
+    servo.cycle(now_ += 1ms);
+    EXPECT_TRUE(servo.snapshot().measured.q.isApprox(plan->trajectory.end(), 1e-12));
+  }
 }
 
 TEST_F(ServoTest, LinkFailingFourCyclesInARowIsAFault) {

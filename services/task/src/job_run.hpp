@@ -1,5 +1,6 @@
 #pragma once
 
+#include <algorithm>
 #include <functional>
 #include <map>
 #include <mutex>
@@ -78,6 +79,8 @@ class JobRun {
 
   /// Publishes a status without journaling (progress within a step).
   void report(const std::string& step_text, double fraction);
+  /// The job's done fraction [0, 1] for the statuses that follow (not published by itself).
+  void set_fraction(double fraction) noexcept { fraction_ = std::clamp(fraction, 0.0, 1.0); }
 
   /// Parts and counters (journaled with the next step).
   std::vector<PartRecord>& parts() noexcept { return parts_; }

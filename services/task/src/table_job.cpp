@@ -183,6 +183,7 @@ class TableJob {
   static std::optional<ExecResult> interrupted(Interrupt i) { return interrupted_result(i); }
 
   std::optional<ExecResult> journal(const std::string& name, const json& detail = json::object()) {
+    run_.set_fraction(fraction());  // parts done of those located (the progress bar)
     if (auto s = run_.step(name, detail); !s) {
       return ExecResult::failed(s.error().message);
     }

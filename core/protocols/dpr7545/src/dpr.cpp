@@ -1,5 +1,6 @@
 #include "cell/dpr7545/dpr.hpp"
 
+#include <bit>
 #include <cstring>
 
 #include "cell/common/check.hpp"
@@ -29,8 +30,29 @@ void Dpr::store(std::size_t offset, std::uint16_t value) const noexcept {
   std::atomic_ref<std::uint16_t>(*word(offset)).store(value, std::memory_order_release);
 }
 
+// A position's two words (low at the lower address) are one little-endian dword at a 4-byte
+// aligned offset: when the window is 4-byte aligned too (the shared-memory window always is)
+// the pair is read and written as one 32-bit atomic, so a simulated slave preempted between
+// its two word stores never shows a torn pair. On the physical ISA card the bus still splits
+// the access into two words, low first, as the slave writes them: position_consistent().
+namespace {
+std::uint32_t* dword_at(std::span<std::byte> window, std::size_t offset) noexcept {
+  std::byte* p = window.data() + offset;
+  return reinterpret_cast<std::uintptr_t>(p) % alignof(std::uint32_t) == 0
+             ? reinterpret_cast<std::uint32_t*>(p)
+             : nullptr;
+}
+static_assert(std::endian::native == std::endian::little,
+              "a position dword is the low word at the lower address");
+static_assert(std::atomic_ref<std::uint32_t>::is_always_lock_free);
+}  // namespace
+
 std::int32_t Dpr::position(int joint) const noexcept {
   const std::size_t at = position_offset(joint);
+  if (std::uint32_t* d = dword_at(window_, at)) {
+    return static_cast<std::int32_t>(
+        std::atomic_ref<std::uint32_t>(*d).load(std::memory_order_acquire));
+  }
   const std::uint32_t low = load(at);
   const std::uint32_t high = load(at + 2);
   return static_cast<std::int32_t>((high << 16) | low);
@@ -55,6 +77,10 @@ std::int32_t Dpr::position_consistent(int joint) const noexcept {
 void Dpr::set_position(int joint, std::int32_t counts) const noexcept {
   const auto value = static_cast<std::uint32_t>(counts);
   const std::size_t at = position_offset(joint);
+  if (std::uint32_t* d = dword_at(window_, at)) {
+    std::atomic_ref<std::uint32_t>(*d).store(value, std::memory_order_release);
+    return;
+  }
   store(at, static_cast<std::uint16_t>(value & 0xFFFFU));  // low word first, as the slave
   store(at + 2, static_cast<std::uint16_t>(value >> 16));
 }

@@ -3,6 +3,7 @@
 #include "cell/dpr7545/dpr.hpp"
 
 #include <atomic>
+#include <chrono>
 #include <cstring>
 #include <thread>
 
@@ -75,34 +76,50 @@ TEST(Dpr, LightingLatchSitsAtTheCardsSecondDecodedRange) {
 }
 
 // A writer alternates between two positions whose high words differ, at a slave's cadence (a
-// write, then other work); a consistent read must only ever see one of the two, never a mix.
+// write, then a microsecond of other work), while the reader reads for 30 ms: a consistent
+// read must only ever see one of the two, never a mix. (A writer that rewrote the pair every
+// few tens of ns, 200 empty spins, is no slave: two reads back to back then met the same
+// torn pair; and 200000 reads took 1 ms, mostly before the writer had started.)
 TEST(Dpr, ConsistentPositionReadNeverTears) {
   auto t = make_heap_transport();
   const Dpr dpr(t->window());
   constexpr std::int32_t kA = 0x0000FFFF;
   constexpr std::int32_t kB = 0x00010000;
   std::atomic<bool> stop{false};
+  std::atomic<int> writes{0};
   dpr.set_position(0, kA);
   std::thread writer([&] {
     bool a = true;
     while (!stop.load(std::memory_order_relaxed)) {
       dpr.set_position(0, a ? kA : kB);
       a = !a;
-      for (int spin = 0; spin < 200; ++spin) {  // the rest of the slave's pass
-        std::atomic_signal_fence(std::memory_order_seq_cst);
+      writes.fetch_add(1, std::memory_order_relaxed);
+      const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(1);
+      while (std::chrono::steady_clock::now() < until) {
       }
     }
   });
+  while (writes.load() < 2) {
+    std::this_thread::yield();
+  }
   int torn = 0;
-  for (int i = 0; i < 200000; ++i) {
-    const std::int32_t p = dpr.position_consistent(0);
-    if (p != kA && p != kB) {
-      ++torn;
+  int seen_a = 0;
+  int seen_b = 0;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(30);
+  while (std::chrono::steady_clock::now() < end) {
+    for (int i = 0; i < 100; ++i) {
+      const std::int32_t p = dpr.position_consistent(0);
+      seen_a += p == kA ? 1 : 0;
+      seen_b += p == kB ? 1 : 0;
+      torn += p != kA && p != kB ? 1 : 0;
     }
   }
   stop = true;
   writer.join();
   EXPECT_EQ(torn, 0);
+  // The reads overlapped the writes: both values were read, many times each.
+  EXPECT_GT(seen_a, 1000);
+  EXPECT_GT(seen_b, 1000);
 }
 
 TEST(SimControl, MailboxRoundTrip) {

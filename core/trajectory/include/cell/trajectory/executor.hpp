@@ -47,6 +47,15 @@ class TrajectoryExecutor {
   /// Stops: the trajectory is dropped and the last setpoint held.
   void stop() noexcept;
 
+  /// Delays the trajectory's remainder by `s` seconds (the host stalled: the path resumes
+  /// where it was instead of jumping ahead by the stall). ALTER keeps the wall clock.
+  void delay(double s) noexcept { start_s_ += s; }
+
+  /// Drops the trajectory and whatever was held: step() is idle until the next load(), so
+  /// the caller's own setpoint stands (after a fault is reset the arm may rest far from the
+  /// last setpoint: holding that would drive it back at once, or fault it again).
+  void clear() noexcept;
+
   ExecState state() const noexcept { return state_; }
   /// True while ALTER corrections are applied (loaded with ALTER and not yet alter_off()).
   bool alter_active() const noexcept { return alter_enabled_; }

@@ -27,7 +27,10 @@ namespace cell::dpr7545 {
 ///
 /// Positions are two words (low, then high), written by the slave in that order. A read after
 /// the handshake's timing_A & 2 is consistent; outside the handshake (idle slave) use
-/// position_consistent(), which re-reads until the high word is stable.
+/// position_consistent(), which re-reads until the high word is stable. Where the window is
+/// 4-byte aligned (the shared-memory window of the simulated slave always is) the pair is one
+/// 32-bit atomic access on both sides, never torn even when the simulator is preempted
+/// between the words.
 ///
 /// Not an owner: the window must outlive the Dpr. Every method is noexcept, allocation-free
 /// and real-time safe; any number of threads may use one Dpr (each access is atomic).
