@@ -114,6 +114,15 @@ class ServoTest : public ::testing::Test {
     return false;
   }
 
+  /// Posts a long move from `q0` and runs cycles until `progress` of it is done.
+  void run_into_a_move(Servo& servo, const JointVector& q0, double progress) {
+    ASSERT_THAT(
+        servo.post_trajectory(*planner_.move_joints(q0, jv({deg(90), deg(45), 200, 0}), 1.0), "t"),
+        IsOk());
+    ASSERT_TRUE(
+        run_until(servo, [&](const ServoSnapshot& s) { return s.progress > progress; }, 10));
+  }
+
   kinematics::RobotModel model_;
   motion::Planner planner_;
   Clock::time_point now_ = Clock::now();
@@ -315,10 +324,8 @@ TEST_F(ServoTest, ControllerFaultStopsMotionIsReportedAndCleared) {
   FakeDriver* fake = driver.get();
   Servo servo(model_, std::move(driver), deg(0.5), 0.5);
   ASSERT_THAT(servo.start(now_), IsOk());
-  ASSERT_THAT(servo.post_trajectory(*planner_.move_joints(q0, jv({deg(90), deg(45), 200, 0}), 1.0),
-                                    "t"),
-              IsOk());
-  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.progress > 0.2; }, 10));
+  run_into_a_move(servo, q0, 0.2);
+  ASSERT_FALSE(HasFatalFailure());
   fake->fault_bits = 0x1000;
   servo.cycle(now_ += 1ms);
   const ServoSnapshot s = servo.snapshot();
@@ -346,10 +353,8 @@ TEST_F(ServoTest, AfterAResetTheArmIsHeldWhereItRestsNotWhereItWasLastSent) {
   FakeDriver* fake = driver.get();
   Servo servo(model_, std::move(driver), deg(0.5), 0.5);
   ASSERT_THAT(servo.start(now_), IsOk());
-  ASSERT_THAT(servo.post_trajectory(*planner_.move_joints(q0, jv({deg(90), deg(45), 200, 0}), 1.0),
-                                    "t"),
-              IsOk());
-  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.progress > 0.3; }, 10));
+  run_into_a_move(servo, q0, 0.3);
+  ASSERT_FALSE(HasFatalFailure());
   fake->fault_bits = 0x0100;
   servo.cycle(now_ += 1ms);
   ASSERT_EQ(servo.snapshot().mode, cell_robot_MODE_FAULT);
