@@ -47,6 +47,33 @@ nlohmann::json to_json(const PartRecord& p) {
                         {"detail", p.detail}};
 }
 
+Status read_progress(const nlohmann::json& progress,
+                     std::vector<PartRecord>& parts,
+                     std::map<std::string, std::uint32_t>& counters) {
+  if (!progress.is_object()) {
+    return Error{Errc::kInvalidArgument, "the progress is not a JSON object"};
+  }
+  std::vector<PartRecord> read_parts;
+  std::map<std::string, std::uint32_t> read_counters;
+  try {
+    if (auto it = progress.find("_parts"); it != progress.end()) {
+      for (const auto& p : *it) {
+        read_parts.push_back(part_from_json(p));
+      }
+    }
+    if (auto it = progress.find("_counters"); it != progress.end()) {
+      for (const auto& [k, v] : it->items()) {
+        read_counters[k] = v.get<std::uint32_t>();
+      }
+    }
+  } catch (const nlohmann::json::exception& e) {
+    return Error{Errc::kInvalidArgument, fmt::format("its parts or counters: {}", e.what())};
+  }
+  parts = std::move(read_parts);
+  counters = std::move(read_counters);
+  return Ok{};
+}
+
 PartRecord part_from_json(const nlohmann::json& j) {
   PartRecord p;
   p.index = j.value("index", 0U);
@@ -86,17 +113,10 @@ JobRun::JobRun(std::string job_id, const task::JobSpec& spec, const kinematics::
       gateway_id_ = r.gateway;
     }
   }
-  // Parts and counters travel inside the journaled progress.
-  if (auto it = progress_.find("_parts"); it != progress_.end() && it->is_array()) {
-    for (const auto& p : *it) {
-      parts_.push_back(part_from_json(p));
-    }
-  }
-  if (auto it = progress_.find("_counters"); it != progress_.end() && it->is_object()) {
-    for (const auto& [k, v] : it->items()) {
-      counters_[k] = v.get<std::uint32_t>();
-    }
-  }
+  // Parts and counters travel inside the journaled progress. The service read them once
+  // before it resumed the job (TaskService::resume_from_journal) and failed a job whose
+  // progress it could not read: this read succeeds.
+  (void)read_progress(progress_, parts_, counters_);
 }
 
 Status JobRun::step(const std::string& name, const nlohmann::json& detail) {

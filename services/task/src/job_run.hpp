@@ -32,6 +32,13 @@ struct PartRecord {
 nlohmann::json to_json(const PartRecord& p);
 PartRecord part_from_json(const nlohmann::json& j);
 
+/// The parts and counters a job's journaled progress carries (`_parts`, `_counters`, as
+/// JobRun::step writes them). Errors: kInvalidArgument naming what could not be read (a key of
+/// the wrong type, say); `parts` and `counters` are then left as they were. Never throws.
+Status read_progress(const nlohmann::json& progress,
+                     std::vector<PartRecord>& parts,
+                     std::map<std::string, std::uint32_t>& counters);
+
 /// How an executor ended.
 struct ExecResult {
   enum class Kind : std::uint8_t { kDone, kFailed, kCancelled, kStopped };

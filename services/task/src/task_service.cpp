@@ -476,16 +476,24 @@ void TaskService::resume_from_journal() {
       continue;
     }
     entry->spec = std::move(*spec);
+    // Parts and counters travel in the progress (job_run.cpp). A job whose progress cannot be
+    // read is failed with the reason, not resumed blind; the other jobs go on.
+    if (auto read = read_progress(entry->progress_json, entry->parts, entry->counters); !read) {
+      entry->state = cell_task_JOB_FAILED;
+      entry->reasons = {"the journaled progress could not be read: " + read.error().message};
+      log::warn("task", "journaled job set aside: its progress could not be read",
+                {{"job", j.job_id}, {"reason", read.error().message}});
+      (void)journal_.set_state(j.job_id, "failed");
+      std::lock_guard lock(mutex_);
+      publish(*entry);
+      jobs_[j.job_id] = std::move(entry);
+      remember_finished(j.job_id);
+      continue;
+    }
     entry->state = state_from(j.state);
     entry->step = entry->steps > 0 ? "resuming after a restart" : "queued";
     if (entry->state == cell_task_JOB_PAUSED) {
       entry->control.pause = true;
-    }
-    // Parts and counters travel in the progress (job_run.cpp).
-    if (auto it = entry->progress_json.find("_parts"); it != entry->progress_json.end()) {
-      for (const auto& p : *it) {
-        entry->parts.push_back(part_from_json(p));
-      }
     }
     log::info("task", "job resumed from the journal",
               {{"job", j.job_id}, {"state", j.state}, {"steps", std::to_string(j.steps)}});
@@ -517,14 +525,16 @@ void TaskService::resume_from_journal() {
           spec) {
         entry->spec = std::move(*spec);
       }
+      // Its parts and counters, from the progress of its last step. (A range-for over
+      // `progress.value("_counters", ...).items()` read a destroyed temporary here, and a
+      // finished conveyor job made every later start crash.) A finished job whose progress
+      // cannot be read is still listed, with the reason instead of its parts.
       const json progress = json::parse(it->progress_json, nullptr, false);
-      if (progress.is_object()) {
-        for (const auto& p : progress.value("_parts", json::array())) {
-          entry->parts.push_back(part_from_json(p));
-        }
-        for (const auto& [k, v] : progress.value("_counters", json::object()).items()) {
-          entry->counters[k] = v.get<std::uint32_t>();
-        }
+      if (auto read = read_progress(progress, entry->parts, entry->counters); !read) {
+        entry->reasons.push_back("its journaled parts and counters could not be read: " +
+                                 read.error().message);
+        log::warn("task", "finished job listed without its parts: its progress could not be read",
+                  {{"job", it->job_id}, {"reason", read.error().message}});
       }
       publish(*entry);
       jobs_[it->job_id] = std::move(entry);
