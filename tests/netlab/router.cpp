@@ -180,6 +180,7 @@ class Router {
         min_held_ms_ = std::min(min_held_ms_, held_ms);
         max_late_ms_ = std::max(max_late_ms_, late_ms);
         sum_late_ms_ += late_ms;
+        late_over_1ms_ += late_ms > 1.0 ? 1 : 0;
         ++released_;
       } else {
         ++write_failed_;
@@ -212,14 +213,15 @@ class Router {
            ",\"write_failed\":" + std::to_string(write_failed_) +
            ",\"min_held_ms\":" + number(released_ > 0 ? min_held_ms_ : 0.0) +
            ",\"max_held_ms\":" + number(max_held_ms_) +
-           ",\"max_late_ms\":" + number(max_late_ms_) + ",\"mean_late_ms\":" +
+           ",\"max_late_ms\":" + number(max_late_ms_) +
+           ",\"late_over_1ms\":" + std::to_string(late_over_1ms_) + ",\"mean_late_ms\":" +
            number(released_ > 0 ? sum_late_ms_ / static_cast<double>(released_) : 0.0) + "}";
     return out;
   }
 
   void reset() {
     links_.assign(links_.size(), Link{});
-    no_route_ = not_ipv4_ = write_failed_ = released_ = 0;
+    no_route_ = not_ipv4_ = write_failed_ = released_ = late_over_1ms_ = 0;
     max_held_ms_ = max_late_ms_ = sum_late_ms_ = 0.0;
     min_held_ms_ = 1e18;
   }
@@ -238,7 +240,8 @@ class Router {
   std::vector<Link> links_;
   std::priority_queue<Queued, std::vector<Queued>, Later> queue_;
   std::uint64_t seq_ = 0;
-  std::uint64_t no_route_ = 0, not_ipv4_ = 0, write_failed_ = 0, released_ = 0;
+  std::uint64_t no_route_ = 0, not_ipv4_ = 0, write_failed_ = 0, released_ = 0,
+                late_over_1ms_ = 0;  // released more than 1 ms after their time (a host stall)
   double max_held_ms_ = 0.0, min_held_ms_ = 1e18, max_late_ms_ = 0.0, sum_late_ms_ = 0.0;
 };
 
