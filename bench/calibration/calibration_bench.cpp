@@ -26,6 +26,7 @@
 #include "cell/calibration/hand_eye.hpp"
 #include "cell/calibration/intrinsics.hpp"
 #include "cell/calibration/planar_model.hpp"
+#include "cell/geometry/angles.hpp"
 #include "sim_views.hpp"
 
 namespace cell::bench {
@@ -34,7 +35,7 @@ namespace {
 namespace cal = cell::calibration;
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 struct Stats {
   std::vector<double> v;

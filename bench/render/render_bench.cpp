@@ -21,6 +21,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "image_bus.hpp"
 #include "cell/render/camera_file.hpp"
@@ -35,7 +36,7 @@ namespace {
 using namespace cell;
 using namespace cell::render;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using cell::geometry::kDeg;
 
 struct Frame {
   std::string name;

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/vision/locate.hpp"
 #include "scenes.hpp"
 
@@ -24,7 +25,7 @@ using namespace cell;
 using namespace cell::vision;
 using Clock = std::chrono::steady_clock;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using cell::geometry::kDeg;
 
 struct Timing {
   double median_ms = 0.0;

@@ -37,6 +37,7 @@
 #include "cell/bus/view.hpp"
 #include "cell/calibration/camera_calibration.hpp"
 #include "cell/calibration/pixel_mapping.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
 #include "cell/process/child.hpp"
 #include "cell/render/mount.hpp"
@@ -52,7 +53,7 @@ using nlohmann::json;
 using namespace std::chrono_literals;
 namespace cal = cell::calibration;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 constexpr double kMappingTolMm = 0.2;
 
 class CalibrationCellTest : public ::testing::Test {

@@ -25,6 +25,7 @@
 #include "cell/bus/request_reply.hpp"
 #include "cell/bus/topics.hpp"
 #include "cell/bus/view.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/motion/planner.hpp"
 #include "cell/motion/wire.hpp"
@@ -42,7 +43,7 @@ using ::testing::HasSubstr;
 using JointVector = kinematics::JointVector;
 using Clock = std::chrono::steady_clock;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 constexpr double kToleranceDeg = 1.0;
 /// The wire carries 0.01 deg: a reading may round by half of that.
 constexpr double kWireDeg = 0.005;

@@ -19,6 +19,7 @@
 #include "cell/bus/topics.hpp"
 #include "cell/bus/view.hpp"
 #include "cell/common/time.hpp"
+#include "cell/geometry/angles.hpp"
 #include "commands.hpp"
 #include "robot_args.hpp"
 #include "table.hpp"
@@ -28,7 +29,7 @@ namespace {
 
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
-constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+using geometry::kDeg;
 
 struct CalibrateArgs {
   std::string camera;
@@ -205,8 +206,8 @@ json camera_json(const cell_calibration_CameraCalibration& c) {
                          {"c_y_px_per_mm", c.c_y_px_per_mm},
                          {"ref_px", {c.ref_u_px, c.ref_v_px}},
                          {"d_t_c_mm", c.d_t_c_mm},
-                         {"b_angl_deg", c.b_angl_rad * kRadToDeg},
-                         {"angl_err_deg", c.angl_err_rad * kRadToDeg},
+                         {"b_angl_deg", c.b_angl_rad / kDeg},
+                         {"angl_err_deg", c.angl_err_rad / kDeg},
                          {"link1_mm", c.link1_mm},
                          {"link2_mm", c.link2_mm}};
   }
@@ -346,7 +347,7 @@ int run_procedure(Session& session, const CalibrateArgs& a,
                                       s),
                           kExitUsage);
     }
-    readings.push_back({(*values)[0] / kRadToDeg, (*values)[1] / kRadToDeg, (*values)[2],
+    readings.push_back({(*values)[0] * kDeg, (*values)[1] * kDeg, (*values)[2],
                         (*values)[3]});
   }
   bus::borrow(r.readings, readings);

@@ -15,6 +15,7 @@
 #include "cell/bus/view.hpp"
 #include "cell/bus/writer.hpp"
 #include "cell/common/time.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/motion/wire.hpp"
 #include "commands.hpp"
 #include "robot_args.hpp"
@@ -32,7 +33,7 @@ struct GrabArgs {
   std::string trigger = "now";
 };
 
-constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
+using geometry::kDeg;
 
 json pixel_json(const cell_vision_PixelPoint& p) { return json{{"u_px", p.u_px}, {"v_px", p.v_px}}; }
 
@@ -49,7 +50,7 @@ json truth_json(const cell_vision_ImageTruth& t, const cell_vision_Image& image)
               {"class", std::string(bus::str(p.class_name))},
               {"center_px", pixel_json(p.center_px)},
               {"angle_rad", p.angle_rad},
-              {"angle_deg", p.angle_rad * kRadToDeg},
+              {"angle_deg", p.angle_rad / kDeg},
               {"corners_px", corners},
               {"visible_fraction", p.visible_fraction}};
     if (auto pose = motion::from_idl(p.world_T_part); pose) {

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "cell/calibration/camera_calibration.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/service/paths.hpp"
 #include "cell/vision/image.hpp"
 #include "cell/vision/locate.hpp"
@@ -24,7 +25,7 @@ namespace {
 
 using nlohmann::json;
 
-constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+using geometry::kDeg;
 
 struct LocateArgs {
   std::string image;
@@ -44,7 +45,7 @@ json detection_json(const vision::Detection& d) {
   json part{{"class", d.class_name},
             {"shape", std::string(vision::to_string(d.shape))},
             {"center_px", json::array({round3(d.center_px.x()), round3(d.center_px.y())})},
-            {"angle_deg", round3(d.angle_rad * kRadToDeg)},
+            {"angle_deg", round3(d.angle_rad / kDeg)},
             {"corners_px", corners},
             {"length_px", round3(d.length_px)},
             {"width_px", round3(d.width_px)},
@@ -57,7 +58,7 @@ json detection_json(const vision::Detection& d) {
   if (d.has_base_pose) {
     part["world"] = {{"x_mm", round3(d.base_pose.x_mm)},
                      {"y_mm", round3(d.base_pose.y_mm)},
-                     {"rz_deg", round3(d.base_pose.rz_rad * kRadToDeg)}};
+                     {"rz_deg", round3(d.base_pose.rz_rad / kDeg)}};
   }
   if (d.grip.verdict != vision::GripVerdict::kNotTested) {
     part["grip"] = {{"verdict", std::string(vision::to_string(d.grip.verdict))},
@@ -71,7 +72,7 @@ json detection_json(const vision::Detection& d) {
                        {"name", g.name},
                        {"x_mm", round3(g.tool.x_mm)},
                        {"y_mm", round3(g.tool.y_mm)},
-                       {"yaw_deg", round3(g.tool.rz_rad * kRadToDeg)}});
+                       {"yaw_deg", round3(g.tool.rz_rad / kDeg)}});
     }
     part["grip"]["clear"] = clear;
   }
@@ -187,14 +188,14 @@ int run_locate(Session& s, const LocateArgs& args) {
     s.out() << fmt::format(
         "{:3d} {:<10} centre ({:8.3f}, {:8.3f}) px  angle {:7.3f} deg  size "
         "{:.2f} x {:.2f} px  q {:.2f}{}",
-        i, d.class_name, d.center_px.x(), d.center_px.y(), d.angle_rad * kRadToDeg, d.length_px,
+        i, d.class_name, d.center_px.x(), d.center_px.y(), d.angle_rad / kDeg, d.length_px,
         d.width_px, d.quality, d.touching ? "  touching" : "");
     if (d.metric) {
       s.out() << fmt::format("  {:.2f} x {:.2f} mm", d.length_mm, d.width_mm);
     }
     if (d.has_base_pose) {
       s.out() << fmt::format("  world ({:.2f}, {:.2f}) mm {:.2f} deg", d.base_pose.x_mm,
-                             d.base_pose.y_mm, d.base_pose.rz_rad * kRadToDeg);
+                             d.base_pose.y_mm, d.base_pose.rz_rad / kDeg);
     }
     if (d.grip.verdict != vision::GripVerdict::kNotTested) {
       s.out() << fmt::format("  grip {}{}", vision::to_string(d.grip.verdict),

@@ -1,8 +1,12 @@
 #pragma once
 
+#include <cmath>
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "session.hpp"
 
@@ -29,6 +33,18 @@ inline CliRun cellctl(std::vector<std::string> args) {
   run.out = out.str();
   run.err = err.str();
   return run;
+}
+
+/// The value of joint `name` in cellctl's JSON joint list ([{"name": .., "value": ..}, ...]);
+/// a test failure and NaN when the list has no such joint.
+inline double value_of(const nlohmann::json& joints, const std::string& name) {
+  for (const auto& j : joints) {
+    if (j["name"] == name) {
+      return j["value"].get<double>();
+    }
+  }
+  ADD_FAILURE() << "no joint " << name << " in " << joints.dump();
+  return NAN;
 }
 
 }  // namespace cell::cellctl::testing

@@ -22,16 +22,8 @@ using nlohmann::json;
 
 using testing::CliRun;
 using testing::cellctl;
+using testing::value_of;
 
-double value_of(const json& joints, const std::string& name) {
-  for (const auto& j : joints) {
-    if (j["name"] == name) {
-      return j["value"].get<double>();
-    }
-  }
-  ADD_FAILURE() << "no joint " << name;
-  return NAN;
-}
 
 // Digest 000 §9.2 case 2: the grab pose (45 deg, 105 deg) puts the tool at (66.37, 407.88) mm
 // (the digest rounds the derived values).

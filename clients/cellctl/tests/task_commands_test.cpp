@@ -27,21 +27,13 @@ using ::testing::HasSubstr;
 using nlohmann::json;
 using testing::CliRun;
 using testing::cellctl;
+using testing::value_of;
 
 // The gateway's start tolerance (config/gateway-*.yaml start_tolerance_deg / _mm: 0.5): a
 // played-back pose is reached when the robot is this close to the recorded joints.
 constexpr double kTolDeg = 0.5;
 constexpr double kTolMm = 0.5;
 
-double value_of(const json& joints, const std::string& name) {
-  for (const auto& j : joints) {
-    if (j["name"] == name) {
-      return j["value"].get<double>();
-    }
-  }
-  ADD_FAILURE() << "no joint " << name << " in " << joints.dump();
-  return NAN;
-}
 
 class CellctlTaskTest : public ::testing::Test {
  protected:

@@ -13,6 +13,7 @@
 #include "cell/geometry/idl_pose.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/testing/env.hpp"
+#include "monitor_test_robots.hpp"
 
 namespace cell::monitor {
 namespace {
@@ -20,10 +21,7 @@ namespace {
 using nlohmann::json;
 using ::testing::HasSubstr;
 
-kinematics::RobotModel robot(const std::string& id) {
-  return kinematics::load_robot(cell::testing::source_dir() + "/config/robots/" + id + ".yaml")
-      .value();
-}
+using test::robot;
 
 TEST(Codec, NonFiniteNumbersBecomeNullAndBadUtf8IsReplacedNotThrown) {
   EXPECT_TRUE(number(std::nan("")).is_null());

@@ -8,6 +8,7 @@
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
+#include "monitor_test_robots.hpp"
 
 namespace cell::monitor {
 namespace {
@@ -21,10 +22,7 @@ constexpr double kTolMm = 1e-9;
 
 double deg(double d) { return d * std::numbers::pi / 180.0; }
 
-kinematics::RobotModel robot(const std::string& id) {
-  return kinematics::load_robot(cell::testing::source_dir() + "/config/robots/" + id + ".yaml")
-      .value();
-}
+using test::robot;
 
 RobotSample sample_at(const kinematics::RobotModel& model, std::vector<double> q) {
   RobotSample s;

@@ -21,13 +21,13 @@
 namespace cell::calibration {
 namespace {
 
-std::string num(double v) { return fmt::format("{:.17g}", v); }
+using detail::exact_number;
 
-Error invalid(const std::string& belt_id, const std::string& what) {
+Error invalid_belt(const std::string& belt_id, const std::string& what) {
   return Error{Errc::kInvalidArgument, fmt::format("belt calibration '{}': {}", belt_id, what)};
 }
 
-Result<BeltCalibration> parse_document(const config::Document& doc) {
+Result<BeltCalibration> parse_belt_document(const config::Document& doc) {
   BeltCalibration b;
   config::MapReader r(doc, doc.root, "");
   r.required("belt_id", b.belt_id);
@@ -64,17 +64,17 @@ Status BeltCalibration::validate() const {
     return Error{Errc::kInvalidArgument, "belt calibration: belt_id is empty"};
   }
   if (robot_id.empty()) {
-    return invalid(belt_id, "robot_id is empty (the robot whose base frame it refers to)");
+    return invalid_belt(belt_id, "robot_id is empty (the robot whose base frame it refers to)");
   }
   if (!std::isfinite(mm_per_count) || !(mm_per_count > 0.0)) {
-    return invalid(belt_id, fmt::format("mm_per_count must be > 0, got {}", mm_per_count));
+    return invalid_belt(belt_id, fmt::format("mm_per_count must be > 0, got {}", mm_per_count));
   }
   if (!direction.allFinite() || std::abs(direction.norm() - 1.0) > 1e-6) {
-    return invalid(belt_id, fmt::format("direction must be a unit vector, got length {}",
+    return invalid_belt(belt_id, fmt::format("direction must be a unit vector, got length {}",
                                         direction.norm()));
   }
   if (!origin_mm.allFinite()) {
-    return invalid(belt_id, "origin_mm is not finite");
+    return invalid_belt(belt_id, "origin_mm is not finite");
   }
   return ok_status();
 }
@@ -89,7 +89,7 @@ Result<BeltCalibration> load_belt_calibration(const std::string& path) {
   if (!doc) {
     return std::move(doc).error();
   }
-  return parse_document(*doc);
+  return parse_belt_document(*doc);
 }
 
 Result<BeltCalibration> parse_belt_calibration(const std::string& text, const std::string& origin) {
@@ -97,7 +97,7 @@ Result<BeltCalibration> parse_belt_calibration(const std::string& text, const st
   if (!doc) {
     return std::move(doc).error();
   }
-  return parse_document(*doc);
+  return parse_belt_document(*doc);
 }
 
 std::string format_belt_calibration(const BeltCalibration& b) {
@@ -109,13 +109,13 @@ std::string format_belt_calibration(const BeltCalibration& b) {
   out += fmt::format("version: {}\n", YAML::Dump(YAML::Node(b.version)));
   out += fmt::format("created_utc: {}\n", YAML::Dump(YAML::Node(b.created_utc)));
   out += fmt::format("source: {}\n", YAML::Dump(YAML::Node(b.source)));
-  out += fmt::format("mm_per_count: {}\n", num(b.mm_per_count));
+  out += fmt::format("mm_per_count: {}\n", exact_number(b.mm_per_count));
   out += fmt::format("direction: [{}, {}, {}]   # unit, base frame, for rising counts\n",
-                     num(b.direction.x()), num(b.direction.y()), num(b.direction.z()));
+                     exact_number(b.direction.x()), exact_number(b.direction.y()), exact_number(b.direction.z()));
   out += fmt::format("origin_mm: [{}, {}, {}]   # the reference part at count 0, base frame\n",
-                     num(b.origin_mm.x()), num(b.origin_mm.y()), num(b.origin_mm.z()));
+                     exact_number(b.origin_mm.x()), exact_number(b.origin_mm.y()), exact_number(b.origin_mm.z()));
   out += fmt::format("quality:\n  rms_mm: {}\n  holdout_mm: {}\n  sample_count: {}\n",
-                     num(b.rms_mm), num(b.holdout_mm), b.sample_count);
+                     exact_number(b.rms_mm), exact_number(b.holdout_mm), b.sample_count);
   return out;
 }
 

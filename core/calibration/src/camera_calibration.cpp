@@ -14,6 +14,7 @@
 #include "cell/bus/view.hpp"
 #include "cell/config/pose.hpp"
 #include "cell/config/yaml.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/geometry/idl_pose.hpp"
 #include "cell/geometry/pose.hpp"
 #include "file_util.hpp"
@@ -21,7 +22,7 @@
 namespace cell::calibration {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 bool finite(std::initializer_list<double> values) {
   for (const double v : values) {
@@ -32,7 +33,7 @@ bool finite(std::initializer_list<double> values) {
   return true;
 }
 
-Error invalid(const std::string& camera_id, const std::string& what) {
+Error invalid_camera(const std::string& camera_id, const std::string& what) {
   return Error{Errc::kInvalidArgument,
                fmt::format("camera calibration '{}': {}", camera_id, what)};
 }
@@ -40,7 +41,7 @@ Error invalid(const std::string& camera_id, const std::string& what) {
 using config::read_pose;
 
 /// 17 significant digits: a double survives the round trip through text exactly.
-std::string num(double v) { return fmt::format("{:.17g}", v); }
+using detail::exact_number;
 
 }  // namespace
 
@@ -57,14 +58,14 @@ Status CameraCalibration::validate() const {
     return Error{Errc::kInvalidArgument, "camera calibration: camera_id is empty"};
   }
   if (width_px < 1 || width_px > 16384 || height_px < 1 || height_px > 16384) {
-    return invalid(camera_id, fmt::format("image size {} x {} px is not in 1..16384", width_px,
+    return invalid_camera(camera_id, fmt::format("image size {} x {} px is not in 1..16384", width_px,
                                           height_px));
   }
   if (robot_id.empty()) {
-    return invalid(camera_id, "robot_id is empty (the robot whose base frame it refers to)");
+    return invalid_camera(camera_id, "robot_id is empty (the robot whose base frame it refers to)");
   }
   if (!std::isfinite(working_plane_z_mm)) {
-    return invalid(camera_id, "working_plane_z_mm is not finite");
+    return invalid_camera(camera_id, "working_plane_z_mm is not finite");
   }
   if (model == ModelType::kPinhole) {
     if (auto m = camera_model(); !m) {
@@ -73,7 +74,7 @@ Status CameraCalibration::validate() const {
     const Eigen::Matrix4d& m = extrinsics.matrix();
     const Eigen::Matrix3d r = extrinsics.linear();
     if (!m.allFinite() || !(r.transpose() * r).isIdentity(1e-6) || r.determinant() < 0) {
-      return invalid(camera_id, "extrinsics are not a finite rigid transform");
+      return invalid_camera(camera_id, "extrinsics are not a finite rigid transform");
     }
     return ok_status();
   }
@@ -81,34 +82,34 @@ Status CameraCalibration::validate() const {
   if (!finite({p.c_x_px_per_mm, p.c_y_px_per_mm, p.ref_u_px, p.ref_v_px, p.center_u_px,
                p.center_v_px, p.d_t_c_mm, p.b_angl_rad, p.angl_err_rad, p.link1_mm, p.link2_mm,
                p.camera_height_mm})) {
-    return invalid(camera_id, "planar: every parameter must be finite");
+    return invalid_camera(camera_id, "planar: every parameter must be finite");
   }
   if (!(p.c_x_px_per_mm > 0) || !(p.c_y_px_per_mm > 0)) {
-    return invalid(camera_id, fmt::format("planar: pixel scales must be > 0, got c_x {} and c_y "
+    return invalid_camera(camera_id, fmt::format("planar: pixel scales must be > 0, got c_x {} and c_y "
                                           "{} px/mm",
                                           p.c_x_px_per_mm, p.c_y_px_per_mm));
   }
   if (!(p.link1_mm > 0) || !(p.link2_mm > 0)) {
-    return invalid(camera_id, "planar: link1_mm and link2_mm must be > 0");
+    return invalid_camera(camera_id, "planar: link1_mm and link2_mm must be > 0");
   }
   return ok_status();
 }
 
 Result<render::CameraModel> CameraCalibration::camera_model() const {
   if (model != ModelType::kPinhole) {
-    return invalid(camera_id, "a planar_7545 calibration has no pinhole model");
+    return invalid_camera(camera_id, "a planar_7545 calibration has no pinhole model");
   }
   auto m = render::CameraModel::create(width_px, height_px, pinhole.fx_px, pinhole.fy_px,
                                        pinhole.cx_px, pinhole.cy_px, pinhole.distortion);
   if (!m) {
-    return invalid(camera_id, m.error().message);
+    return invalid_camera(camera_id, m.error().message);
   }
   return m;
 }
 
 namespace {
 
-Result<CameraCalibration> parse_document(const config::Document& doc) {
+Result<CameraCalibration> parse_camera_document(const config::Document& doc) {
   CameraCalibration c;
   config::MapReader r(doc, doc.root, "");
   r.required("camera_id", c.camera_id);
@@ -200,7 +201,7 @@ Result<CameraCalibration> load_camera_calibration(const std::string& path) {
   if (!doc) {
     return std::move(doc).error();
   }
-  return parse_document(*doc);
+  return parse_camera_document(*doc);
 }
 
 Result<CameraCalibration> parse_camera_calibration(const std::string& text,
@@ -209,7 +210,7 @@ Result<CameraCalibration> parse_camera_calibration(const std::string& text,
   if (!doc) {
     return std::move(doc).error();
   }
-  return parse_document(*doc);
+  return parse_camera_document(*doc);
 }
 
 std::string format_camera_calibration(const CameraCalibration& c) {
@@ -226,33 +227,33 @@ std::string format_camera_calibration(const CameraCalibration& c) {
   }
   out += fmt::format("robot_id: {}\n", YAML::Dump(YAML::Node(c.robot_id)));
   out += fmt::format("width_px: {}\nheight_px: {}\n", c.width_px, c.height_px);
-  out += fmt::format("working_plane_z_mm: {}\n", num(c.working_plane_z_mm));
+  out += fmt::format("working_plane_z_mm: {}\n", exact_number(c.working_plane_z_mm));
   if (c.model == ModelType::kPinhole) {
     const auto& p = c.pinhole;
     const auto d = p.distortion.as_array();
     out += fmt::format("pinhole:\n  fx_px: {}\n  fy_px: {}\n  cx_px: {}\n  cy_px: {}\n",
-                       num(p.fx_px), num(p.fy_px), num(p.cx_px), num(p.cy_px));
-    out += fmt::format("  distortion: [{}, {}, {}, {}, {}]  # k1 k2 p1 p2 k3\n", num(d[0]),
-                       num(d[1]), num(d[2]), num(d[3]), num(d[4]));
+                       exact_number(p.fx_px), exact_number(p.fy_px), exact_number(p.cx_px), exact_number(p.cy_px));
+    out += fmt::format("  distortion: [{}, {}, {}, {}, {}]  # k1 k2 p1 p2 k3\n", exact_number(d[0]),
+                       exact_number(d[1]), exact_number(d[2]), exact_number(d[3]), exact_number(d[4]));
     const Eigen::Vector3d t = c.extrinsics.translation();
     const geometry::Rpy rpy = geometry::rpy_from_rotation(c.extrinsics.linear());
     out += fmt::format(
         "extrinsics:  # {}\n  xyz_mm: [{}, {}, {}]\n  rpy_deg: [{}, {}, {}]\n",
-        c.mounting == Mounting::kFixed ? "base_T_camera" : "mount_T_camera", num(t.x()),
-        num(t.y()), num(t.z()), num(rpy.roll / kDeg), num(rpy.pitch / kDeg), num(rpy.yaw / kDeg));
+        c.mounting == Mounting::kFixed ? "base_T_camera" : "mount_T_camera", exact_number(t.x()),
+        exact_number(t.y()), exact_number(t.z()), exact_number(rpy.roll / kDeg), exact_number(rpy.pitch / kDeg), exact_number(rpy.yaw / kDeg));
   } else {
     const auto& q = c.planar;
     out += fmt::format(
         "planar:\n  c_x_px_per_mm: {}\n  c_y_px_per_mm: {}\n  ref_u_px: {}\n  ref_v_px: {}\n"
         "  center_u_px: {}\n  center_v_px: {}\n  d_t_c_mm: {}\n  b_angl_deg: {}\n"
         "  angl_err_deg: {}\n  link1_mm: {}\n  link2_mm: {}\n  camera_height_mm: {}\n",
-        num(q.c_x_px_per_mm), num(q.c_y_px_per_mm), num(q.ref_u_px), num(q.ref_v_px),
-        num(q.center_u_px), num(q.center_v_px), num(q.d_t_c_mm), num(q.b_angl_rad / kDeg),
-        num(q.angl_err_rad / kDeg), num(q.link1_mm), num(q.link2_mm), num(q.camera_height_mm));
+        exact_number(q.c_x_px_per_mm), exact_number(q.c_y_px_per_mm), exact_number(q.ref_u_px), exact_number(q.ref_v_px),
+        exact_number(q.center_u_px), exact_number(q.center_v_px), exact_number(q.d_t_c_mm), exact_number(q.b_angl_rad / kDeg),
+        exact_number(q.angl_err_rad / kDeg), exact_number(q.link1_mm), exact_number(q.link2_mm), exact_number(q.camera_height_mm));
   }
   out += fmt::format(
       "quality:\n  rms_px: {}\n  holdout_rms_px: {}\n  holdout_mm: {}\n  sample_count: {}\n",
-      num(c.quality.rms_px), num(c.quality.holdout_rms_px), num(c.quality.holdout_mm),
+      exact_number(c.quality.rms_px), exact_number(c.quality.holdout_rms_px), exact_number(c.quality.holdout_mm),
       c.quality.sample_count);
   return out;
 }
@@ -283,7 +284,7 @@ Result<CameraCalibration> nominal_calibration(const render::CameraDescription& c
     c.extrinsics = camera.nominal.pose;
   } else {
     if (robot_id.empty()) {
-      return invalid(camera.id, "a fixed camera's calibration needs the robot whose base frame "
+      return invalid_camera(camera.id, "a fixed camera's calibration needs the robot whose base frame "
                                 "it refers to");
     }
     c.mounting = Mounting::kFixed;
@@ -353,7 +354,7 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
       c.model = ModelType::kPlanar7545;
       break;
     default:
-      return invalid(c.camera_id, fmt::format("unknown model type {}", static_cast<int>(m.model)));
+      return invalid_camera(c.camera_id, fmt::format("unknown model type {}", static_cast<int>(m.model)));
   }
   switch (m.mounting) {
     case cell_calibration_MOUNT_FIXED:
@@ -363,7 +364,7 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
       c.mounting = Mounting::kEyeInHand;
       break;
     default:
-      return invalid(c.camera_id,
+      return invalid_camera(c.camera_id,
                      fmt::format("unknown mounting {}", static_cast<int>(m.mounting)));
   }
   const std::string_view frame = bus::str(m.mount_frame);
@@ -373,7 +374,7 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
     } else if (frame == "link2") {
       c.mount_frame = render::MountFrame::kLink2;
     } else {
-      return invalid(c.camera_id, fmt::format("mount_frame must be tool or link2, got '{}'",
+      return invalid_camera(c.camera_id, fmt::format("mount_frame must be tool or link2, got '{}'",
                                               frame));
     }
   }
@@ -382,7 +383,7 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
   c.height_px = static_cast<int>(std::min<std::uint32_t>(m.height_px, 1U << 30));
   const auto d = bus::span(m.distortion);
   if (d.size() != 0 && d.size() != 5) {
-    return invalid(c.camera_id, fmt::format("distortion has {} coefficients; 0 or 5 (k1 k2 p1 p2 "
+    return invalid_camera(c.camera_id, fmt::format("distortion has {} coefficients; 0 or 5 (k1 k2 p1 p2 "
                                             "k3) expected",
                                             d.size()));
   }
@@ -393,7 +394,7 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
   if (c.model == ModelType::kPinhole) {
     auto pose = geometry::pose_from_idl(m.extrinsics);
     if (!pose) {
-      return invalid(c.camera_id, "extrinsics: " + pose.error().message);
+      return invalid_camera(c.camera_id, "extrinsics: " + pose.error().message);
     }
     c.extrinsics = *pose;
   }

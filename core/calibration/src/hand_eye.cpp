@@ -15,6 +15,7 @@
 #include <opencv2/core/eigen.hpp>
 
 #include "cell/calibration/intrinsics.hpp"
+#include "cell/geometry/angles.hpp"
 #include "costs.hpp"
 #include "solver_util.hpp"
 
@@ -25,18 +26,13 @@ using detail::kIntrinsicsSize;
 using detail::kPoseSize;
 using Pose6 = std::array<double, kPoseSize>;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 constexpr double kSamePoseMm = 0.1;
 constexpr double kSamePoseDeg = 0.01;
 constexpr double kAxisMinAngleDeg = 1.0;  // relative rotations below this carry no axis
 constexpr double kPlanarTiltDeg = 0.5;    // a SCARA's mount z is the base z to this
 
-void report_progress(const ProgressFn& progress, std::string_view stage, std::size_t step,
-                     std::size_t total, std::string_view message) {
-  if (progress) {
-    progress(stage, step, total, message);
-  }
-}
+using detail::report_progress;
 
 Eigen::Matrix3d average_rotation(const std::vector<Eigen::Matrix3d>& rotations) {
   Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();

@@ -25,12 +25,7 @@ using detail::kIntrinsicsSize;
 using detail::kPoseSize;
 using Pose6 = std::array<double, kPoseSize>;
 
-void report_progress(const ProgressFn& progress, std::string_view stage, std::size_t step,
-                     std::size_t total, std::string_view message) {
-  if (progress) {
-    progress(stage, step, total, message);
-  }
-}
+using detail::report_progress;
 
 std::vector<int> constant_intrinsics(const IntrinsicsOptions& o) {
   std::vector<int> fixed;

@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 
 #include "cell/calibration/pixel_mapping.hpp"
+#include "cell/geometry/angles.hpp"
 #include "costs.hpp"
 #include "solver_util.hpp"
 
@@ -18,7 +19,7 @@ namespace cell::calibration {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
-constexpr double kDeg = kPi / 180.0;
+using geometry::kDeg;
 
 Eigen::Vector2d unit(double a) { return {std::cos(a), std::sin(a)}; }
 

@@ -17,6 +17,14 @@
 
 namespace cell::calibration::detail {
 
+/// Calls `progress` (when set) with one step of a long solve.
+inline void report_progress(const ProgressFn& progress, std::string_view stage, std::size_t step,
+                            std::size_t total, std::string_view message) {
+  if (progress) {
+    progress(stage, step, total, message);
+  }
+}
+
 /// Single-threaded (the cell's PCs share their cores), deterministic, tight tolerances:
 /// calibrations are small problems solved once.
 inline ceres::Solver::Options solver_options(int max_iterations) {

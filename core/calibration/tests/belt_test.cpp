@@ -17,6 +17,7 @@
 #include "cell/calibration/intrinsics.hpp"
 #include "cell/calibration/marker.hpp"
 #include "cell/calibration/pixel_mapping.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/testing/matchers.hpp"
 #include "sim_views.hpp"
 
@@ -27,7 +28,7 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 // config/scenes/belt_conveyor.yaml: 1024 pulses per revolution, 50 mm roller, x4 quadrature
 // (digest 002 §6.2 T9: 0.03835 mm per count).
 const double kTrueMmPerCount = std::numbers::pi * 50.0 / (1024.0 * 4.0);

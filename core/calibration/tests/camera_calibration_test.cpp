@@ -13,6 +13,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
@@ -24,7 +25,7 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 render::CameraDescription camera(const std::string& name) {
   auto c = render::load_camera(cell::testing::source_dir() + "/config/cameras/" + name);

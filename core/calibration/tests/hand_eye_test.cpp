@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "cell/calibration/pixel_mapping.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/render/mount.hpp"
 #include "cell/testing/matchers.hpp"
 #include "sim_views.hpp"
@@ -24,7 +25,7 @@ using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 using testing::HandEyeScenario;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 constexpr double kRotationTolDeg = 0.05;   // the issue: rotation error under 0.05 deg
 constexpr double kTranslationTolMm = 0.2;  // and translation under 0.2 mm
 constexpr double kPoseRotSigmaDeg = 0.05;

@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "cell/calibration/pixel_mapping.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/render/mount.hpp"
 #include "cell/testing/matchers.hpp"
 #include "sim_views.hpp"
@@ -21,7 +22,7 @@ namespace {
 using ::cell::testing::IsErrWith;
 using ::cell::testing::IsOk;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 constexpr double kTolMm = 0.01;  // the digest prints two decimals
 
 /// The code's defaults (digest 000 §4): c_x = 3.56, c_y = 3.48 px/mm, Ref_Point (3, 457),

@@ -1,4 +1,5 @@
 #include "cell/geometry/angles.hpp"
+#include "cell/testing/tolerances.hpp"
 
 #include <cmath>
 #include <limits>
@@ -8,7 +9,7 @@
 namespace cell::geometry {
 namespace {
 
-constexpr double kTolRad = 1e-12;
+using ::cell::testing::kTolRad;
 
 TEST(Angles, DegreesAndRadiansConvertBothWays) {
   EXPECT_NEAR(deg_to_rad(180.0), kPi, kTolRad);

@@ -7,6 +7,7 @@
 
 #include "cell/geometry/angles.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 
 namespace cell::geometry {
 namespace {
@@ -15,8 +16,8 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsNearPose;
 using ::cell::testing::IsOk;
 
-constexpr double kTolMm = 1e-9;
-constexpr double kTolRad = 1e-12;
+using ::cell::testing::kTolMm;
+using ::cell::testing::kTolRad;
 
 // Digest 002 §6.2 T1: part.loc = to.cam[1] : vis.loc : grip.part.
 TEST(Pose2, VplusCompoundTransformReproducesDigestT1) {

@@ -7,6 +7,7 @@
 
 #include "cell/geometry/angles.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 
 namespace cell::geometry {
 namespace {
@@ -15,7 +16,7 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsNearPose;
 using ::cell::testing::IsOk;
 
-constexpr double kTol = 1e-12;
+using ::cell::testing::kTol;
 
 TEST(Rpy, IsRzRyRxAboutFixedAxes) {
   const Rpy rpy{.roll = 0.3, .pitch = -0.4, .yaw = 1.1};

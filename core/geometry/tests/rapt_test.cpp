@@ -6,6 +6,7 @@
 #include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 
 namespace cell::geometry {
 namespace {
@@ -14,7 +15,7 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsNearPose;
 using ::cell::testing::IsOk;
 
-constexpr double kTol = 1e-12;
+using ::cell::testing::kTol;
 
 // A body written the thesis's way (digest 003 §1.4): rows 1-3 are the body's X, Y, Z axes in the
 // world, row 4 (a41, a42, a43) is its position. This body is turned 90 deg about the world Z and

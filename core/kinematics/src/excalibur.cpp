@@ -8,6 +8,7 @@
 #include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
 #include "model_issues.hpp"
+#include "describe.hpp"
 
 namespace cell::kinematics {
 namespace {
@@ -20,10 +21,7 @@ constexpr double kShoulderToleranceMm = 1e-10;  // wrist centre at the shoulder:
 constexpr double kWristTolerance = 1e-12;       // |sin theta5| below this: theta4 is free
 constexpr double kReachTolerance = 1e-12;       // 1 -+ S3 down to -this is clamped to 0
 
-std::string describe_target(const Eigen::Isometry3d& base_T_tool) {
-  const Eigen::Vector3d p = base_T_tool.translation();
-  return fmt::format("target ({:.3f}, {:.3f}, {:.3f}) mm", p.x(), p.y(), p.z());
-}
+using detail::describe_target;
 
 // Solves all 8 branches into `out`. Allocation-free unless it fails.
 Status solve(const ExcaliburModel& model,

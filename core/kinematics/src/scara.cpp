@@ -7,6 +7,7 @@
 #include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
 #include "model_issues.hpp"
+#include "describe.hpp"
 
 namespace cell::kinematics {
 namespace {
@@ -17,7 +18,7 @@ using geometry::wrap_to_pi;
 constexpr double kTiltToleranceRad = 1e-6;  // flange z axis vs base z
 const double kCosTiltTolerance = std::cos(kTiltToleranceRad);
 constexpr double kReachToleranceMm = 1e-9;  // at the inner and outer reach circles
-constexpr double kAxisToleranceMm = 1e-10;  // R axis on the J1 axis: J1 undetermined
+constexpr double kRollOnShoulderAxisMm = 1e-10;  // R axis on the J1 axis: J1 undetermined
 
 double roll_sign(const ScaraModel& model) noexcept {
   return model.roll_sense == RotationSense::kClockwise ? -1.0 : 1.0;
@@ -70,7 +71,7 @@ Status solve(const ScaraModel& model,
   // cos/sin of J1 come from the angle-sum formula instead of cos(J1)/sin(J1).
   const double w = (r2 + l1 * l1 - l2 * l2) / (2.0 * l1);
   const double h = std::sqrt(std::max(r2 - w * w, 0.0));
-  const bool on_axis = rho < kAxisToleranceMm;
+  const bool on_axis = rho < kRollOnShoulderAxisMm;
   const double cos_bearing = on_axis ? 1.0 : x / rho;
   const double sin_bearing = on_axis ? 0.0 : y / rho;
   const double wh = std::sqrt(w * w + h * h);
@@ -111,10 +112,7 @@ Status solve(const ScaraModel& model,
   return ok_status();
 }
 
-std::string describe_target(const Eigen::Isometry3d& base_T_tool) {
-  const Eigen::Vector3d p = base_T_tool.translation();
-  return fmt::format("target ({:.3f}, {:.3f}, {:.3f}) mm", p.x(), p.y(), p.z());
-}
+using detail::describe_target;
 
 Status check_reference(const ScaraJoints& reference) {
   if (!reference.allFinite()) {

@@ -8,6 +8,7 @@
 #include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 #include "support/test_robots.hpp"
 
 namespace cell::kinematics {
@@ -20,7 +21,7 @@ using geometry::deg_to_rad;
 using geometry::kPi;
 using geometry::rad_to_deg;
 
-constexpr double kTolMm = 1e-9;
+using ::cell::testing::kTolMm;
 constexpr double kPrintedTol = 5.1e-5;   // the digest prints 4 decimals
 constexpr double kPrintedTolMm = 0.051;  // placeholder positions printed to 0.001 cm
 

@@ -9,6 +9,7 @@
 
 #include "cell/geometry/pose.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 #include "support/kdl_chains.hpp"
 #include "support/test_robots.hpp"
 
@@ -17,8 +18,8 @@ namespace {
 
 using ::cell::testing::IsNearPose;
 
-constexpr int kSamples = 2000;
-constexpr double kTolMm = 1e-9;
+constexpr int kKdlSamples = 2000;
+using ::cell::testing::kTolMm;
 
 TEST(KdlCrossCheck, ExcaliburForwardMatchesTheDhChain) {
   const auto robot = test::load_shipped("excalibur");
@@ -30,7 +31,7 @@ TEST(KdlCrossCheck, ExcaliburForwardMatchesTheDhChain) {
   KDL::ChainFkSolverPos_recursive fk(chain);
   std::mt19937_64 rng(61);
   std::uniform_real_distribution<double> angle(-4.0, 4.0);
-  for (int n = 0; n < kSamples; ++n) {
+  for (int n = 0; n < kKdlSamples; ++n) {
     ExcaliburJoints q;
     for (int i = 0; i < 6; ++i) {
       q(i) = angle(rng);
@@ -53,7 +54,7 @@ TEST(KdlCrossCheck, ScaraForwardMatchesTheChainForBothRobots) {
     std::mt19937_64 rng(7);
     std::uniform_real_distribution<double> angle(-4.0, 4.0);
     std::uniform_real_distribution<double> stroke(-50.0, 300.0);
-    for (int n = 0; n < kSamples; ++n) {
+    for (int n = 0; n < kKdlSamples; ++n) {
       const ScaraJoints q(angle(rng), angle(rng), stroke(rng), angle(rng));
       KDL::Frame f;
       ASSERT_GE(fk.JntToCart(peer::scara_kdl_joints(m, q), f), 0);

@@ -8,6 +8,7 @@
 #include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose2.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 #include "support/test_robots.hpp"
 
 namespace cell::kinematics {
@@ -20,7 +21,7 @@ using ::cell::testing::IsOk;
 using geometry::deg_to_rad;
 using ::testing::ElementsAre;
 
-constexpr double kTolMm = 1e-9;
+using ::cell::testing::kTolMm;
 
 TEST(RobotModel, ExposesKindDofJointsAndBranches) {
   const auto scara = test::load_shipped("ibm7545");

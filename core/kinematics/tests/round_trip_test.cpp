@@ -13,14 +13,15 @@
 #include "cell/kinematics/excalibur.hpp"
 #include "cell/kinematics/scara.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 #include "support/test_robots.hpp"
 
 namespace cell::kinematics {
 namespace {
 
 constexpr int kSamples = 10000;
-constexpr double kTolMm = 1e-9;
-constexpr double kTolRad = 1e-12;
+using ::cell::testing::kTolMm;
+using ::cell::testing::kTolRad;
 constexpr double kSameJointsTol = 1e-7;  // rad or mm: "this branch is the input"
 
 template <typename Joints, std::size_t N>

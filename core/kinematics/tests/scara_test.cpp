@@ -9,6 +9,7 @@
 #include "cell/geometry/pose.hpp"
 #include "cell/geometry/pose2.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 #include "support/test_robots.hpp"
 
 namespace cell::kinematics {
@@ -21,7 +22,7 @@ using geometry::deg_to_rad;
 using geometry::rad_to_deg;
 using ::testing::HasSubstr;
 
-constexpr double kTolMm = 1e-9;
+using ::cell::testing::kTolMm;
 
 class Ibm7545Test : public ::testing::Test {
  protected:

@@ -14,6 +14,7 @@
 #include "cell/testing/matchers.hpp"
 #include "cell/trajectory/executor.hpp"
 #include "cell/testing/vectors.hpp"
+#include "joint_vectors.hpp"
 
 namespace cell::motion {
 namespace {
@@ -29,9 +30,7 @@ kinematics::RobotModel robot(const std::string& name) {
 
 double deg(double d) { return d * std::numbers::pi / 180; }
 
-inline trajectory::JointVector jv(std::initializer_list<double> values) {
-  return cell::testing::vec<trajectory::JointVector>(values);
-}
+using test::jv;
 
 // The 7545's image-grab pose (digest 000 §1.3): J1 45 deg, J2 105 deg, Z 0, R 0.
 trajectory::JointVector grab_pose() { return jv({deg(45), deg(105), 0, 0}); }

@@ -8,6 +8,7 @@
 
 #include "cell/testing/matchers.hpp"
 #include "cell/testing/vectors.hpp"
+#include "joint_vectors.hpp"
 
 namespace cell::motion {
 namespace {
@@ -15,9 +16,7 @@ namespace {
 using ::cell::testing::IsErrWith;
 using ::cell::testing::IsOk;
 
-inline trajectory::JointVector jv(std::initializer_list<double> values) {
-  return cell::testing::vec<trajectory::JointVector>(values);
-}
+using test::jv;
 
 Plan sample_plan() {
   Plan plan;

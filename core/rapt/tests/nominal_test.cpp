@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 #include "support.hpp"
 
 namespace cell::rapt {
@@ -15,7 +16,7 @@ using ::testing::HasSubstr;
 using testing::thesis_pose;
 using V = Eigen::Vector3d;
 
-constexpr double kTolMm = 1e-9;
+using ::cell::testing::kTolMm;
 
 // Digest 003 §6.1: the nominal positions printed in Appendix V section 3 (rows X, Y, Z, T)
 // and the ROBMOD extract of situation 1.

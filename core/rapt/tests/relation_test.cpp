@@ -7,6 +7,7 @@
 
 #include "cell/rapt/rule_tables.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 
 namespace cell::rapt {
 namespace {
@@ -14,8 +15,8 @@ namespace {
 using ::cell::testing::IsNearPose;
 using Eigen::Vector3d;
 
-constexpr double kTolMm = 1e-9;
-const Tolerances kTol{1e-6, 1e-9};
+using ::cell::testing::kTolMm;
+const Tolerances kTolerances{1e-6, 1e-9};
 
 /// A feature frame with origin o and X axis x.
 Pose feat(const Vector3d& o, const Vector3d& x) { return frame_from_x(o, x.normalized()); }
@@ -72,12 +73,12 @@ struct Box {
 TEST(Combination, TwoFacePairsGiveALinAlongTheirCommonLine) {
   const Box b;
   const auto r = intersect(rel(RelType::kAgpp, b.table_top, b.bottom),
-                           rel(RelType::kAgpp, b.wall, b.side), kTol);
+                           rel(RelType::kAgpp, b.wall, b.side), kTolerances);
   ASSERT_EQ(r.outcome, Outcome::kOk) << r.detail;
   EXPECT_EQ(r.relation.type, RelType::kLin);
   EXPECT_TRUE(parallel(r.relation.a_T_fa.linear().col(0), Vector3d::UnitY(), 1e-12));
   // A third pair fixes it (Table 1: AGPP+LIN -> FIX) at the identity.
-  const auto fix = intersect(r.relation, rel(RelType::kAgpp, b.wall2, b.side2), kTol);
+  const auto fix = intersect(r.relation, rel(RelType::kAgpp, b.wall2, b.side2), kTolerances);
   ASSERT_EQ(fix.outcome, Outcome::kOk);
   EXPECT_EQ(fix.relation.type, RelType::kFix);
   EXPECT_THAT(fixed_pose(fix.relation), IsNearPose(Pose::Identity(), kTolMm));
@@ -88,12 +89,12 @@ TEST(Combination, ParallelFacePairsAreTheSpecialCaseAgppOrIncompatible) {
   const Pose top = feat({0, 0, 10}, {0, 0, 1});
   const Pose lid = feat({0, 0, 10}, {0, 0, -1});
   const auto same =
-      intersect(rel(RelType::kAgpp, b.table_top, b.bottom), rel(RelType::kAgpp, top, lid), kTol);
+      intersect(rel(RelType::kAgpp, b.table_top, b.bottom), rel(RelType::kAgpp, top, lid), kTolerances);
   ASSERT_EQ(same.outcome, Outcome::kOk) << same.detail;
   EXPECT_EQ(same.relation.type, RelType::kAgpp);
   const Pose lid_off = feat({0, 0, 12}, {0, 0, -1});
   const auto bad = intersect(rel(RelType::kAgpp, b.table_top, b.bottom),
-                             rel(RelType::kAgpp, top, lid_off), kTol);
+                             rel(RelType::kAgpp, top, lid_off), kTolerances);
   EXPECT_EQ(bad.outcome, Outcome::kIncompatible);
   EXPECT_NEAR(bad.residual_mm, 2.0, 1e-9);
 }
@@ -105,13 +106,13 @@ TEST(Combination, FaceAndFitsGiveRotWhenTheAxisIsAlongTheNormal) {
   const Pose shaft = feat({0, 0, 0}, {0, 0, -1});  // body B: shaft pointing down
   const Box b;
   const auto r =
-      intersect(rel(RelType::kFits, hole, shaft), rel(RelType::kAgpp, b.table_top, b.bottom), kTol);
+      intersect(rel(RelType::kFits, hole, shaft), rel(RelType::kAgpp, b.table_top, b.bottom), kTolerances);
   ASSERT_EQ(r.outcome, Outcome::kOk) << r.detail;
   EXPECT_EQ(r.relation.type, RelType::kRot);
   // The rotation axis is the hole axis through (5,5,0).
   EXPECT_TRUE(r.relation.a_T_fa.translation().head<2>().isApprox(Eigen::Vector2d(5, 5), 1e-12));
   // + PARAX fixes the angle (Table 1: PARAX+ROT -> FIX).
-  const auto fix = intersect(r.relation, rel(RelType::kParax, b.wall, b.wall), kTol);
+  const auto fix = intersect(r.relation, rel(RelType::kParax, b.wall, b.wall), kTolerances);
   ASSERT_EQ(fix.outcome, Outcome::kOk) << fix.detail;
   EXPECT_EQ(fix.relation.type, RelType::kFix);
   const Pose x = fixed_pose(fix.relation);
@@ -124,10 +125,10 @@ TEST(Combination, FaceAndCylinderHasTwoSolutionsAndTwoCylindersNoRule) {
   const Pose rail = feat({0, 0, 0}, {1, 0, 0});  // a plane of A with normal x
   const Pose edge = feat({0, 0, 0}, {0, 1, 1});  // an edge of B
   const auto two = intersect(rel(RelType::kAgpp, b.table_top, b.bottom),
-                             rel(RelType::kAgpc, rail, edge, 0.0), kTol);
+                             rel(RelType::kAgpc, rail, edge, 0.0), kTolerances);
   EXPECT_EQ(two.outcome, Outcome::kTwoSolutions) << two.detail;
   const auto none = intersect(rel(RelType::kAgpc, rail, edge, 0.0),
-                              rel(RelType::kAgpc, b.table_top, edge, 0.0), kTol);
+                              rel(RelType::kAgpc, b.table_top, edge, 0.0), kTolerances);
   EXPECT_EQ(none.outcome, Outcome::kInexpressible);
 }
 
@@ -155,7 +156,7 @@ TEST(Combination, RandomRelationsHoldAtTheirPoseAndIntersectExactly) {
       EXPECT_LT(mm, 1e-9) << to_string(t);
       EXPECT_LT(rad, 1e-9) << to_string(t);
       Relation fix = rel(RelType::kFix, x, Pose::Identity());
-      const auto both = intersect(r, fix, kTol);
+      const auto both = intersect(r, fix, kTolerances);
       ASSERT_EQ(both.outcome, Outcome::kOk) << to_string(t) << ": " << both.detail;
       EXPECT_EQ(both.relation.type, RelType::kFix);
       EXPECT_THAT(fixed_pose(both.relation), IsNearPose(x, 1e-7));
@@ -176,7 +177,7 @@ TEST(Creation, StackedBlocksGiveAVirtualAgpp) {
                                feat({0, 0, 0}, {0, 0, -1}));  // block2(1) - block1(2)
   block2_block1.a = 1;
   block2_block1.b = 2;
-  const auto r = compose(table_block2, block2_block1, kTol);
+  const auto r = compose(table_block2, block2_block1, kTolerances);
   ASSERT_EQ(r.outcome, Outcome::kOk) << r.detail;
   EXPECT_EQ(r.relation.type, RelType::kAgpp);
   EXPECT_FALSE(r.relation.looser);
@@ -196,7 +197,7 @@ TEST(Creation, LinesComposeIntoAPlaneAndRotationWithLineIsLooser) {
   Relation lin2 = rel(RelType::kLin, feat({0, 0, 0}, {0, 1, 0}), feat({0, 0, 0}, {0, 1, 0}));
   lin2.a = 1;
   lin2.b = 2;
-  const auto planar = compose(lin1, lin2, kTol);
+  const auto planar = compose(lin1, lin2, kTolerances);
   ASSERT_EQ(planar.outcome, Outcome::kOk);
   EXPECT_EQ(planar.relation.type, RelType::kLinlin);  // Table 2: LIN,LIN -> LINLIN
   EXPECT_FALSE(planar.relation.looser);
@@ -204,7 +205,7 @@ TEST(Creation, LinesComposeIntoAPlaneAndRotationWithLineIsLooser) {
   Relation lin3 = rel(RelType::kLin, feat({0, 0, 0}, {1, 0, 1}), feat({0, 0, 0}, {1, 0, 1}));
   lin3.a = 1;
   lin3.b = 2;
-  const auto loose = compose(rot, lin3, kTol);
+  const auto loose = compose(rot, lin3, kTolerances);
   ASSERT_EQ(loose.outcome, Outcome::kOk);
   EXPECT_EQ(loose.relation.type, RelType::kParax);  // Table 2: ROT,LIN -> PARAX*
   EXPECT_TRUE(loose.relation.looser);

@@ -18,7 +18,7 @@ using ::testing::HasSubstr;
 using testing::thesis_pose;
 using V = Eigen::Vector3d;
 
-constexpr double kTolMm = 1e-6;
+constexpr double kRunTolMm = 1e-6;
 
 const RunResult& appendix_v_run() {
   static const RunResult r = [] {
@@ -231,7 +231,7 @@ TEST(RunProperty, RecoversRandomDisplacementsAndPropagatesThemByTheLinkingRules)
       auto r = run(cp, readings_for(cp, pkg.index, truth));
       ASSERT_TRUE(r) << r.error().message;
       EXPECT_THAT(r->packages[static_cast<std::size_t>(pkg.index)].verified,
-                  IsNearPose(truth, kTolMm))
+                  IsNearPose(truth, kRunTolMm))
           << "situation " << pkg.situation;
       expect_links_hold(cp, *r);
     }
@@ -244,10 +244,10 @@ TEST(RunProperty, RecoversRandomDisplacementsAndPropagatesThemByTheLinkingRules)
   const int b1 = testing::body(cp, "b1");
   const int b3 = testing::body(cp, "b3");
   const Pose shift = truth * cp.nominal_pose(b3, 3).inverse();  // world-frame displacement
-  EXPECT_THAT(r->actual_pose(b1, 4), IsNearPose(shift * cp.nominal_pose(b1, 4), kTolMm));
-  EXPECT_THAT(r->actual_pose(b1, 5), IsNearPose(shift * cp.nominal_pose(b1, 5), kTolMm));
-  EXPECT_THAT(r->actual_pose(b3, 5), IsNearPose(shift * cp.nominal_pose(b3, 5), kTolMm));
-  EXPECT_THAT(r->actual_pose(b3, 6), IsNearPose(cp.nominal_pose(b3, 6), kTolMm));
+  EXPECT_THAT(r->actual_pose(b1, 4), IsNearPose(shift * cp.nominal_pose(b1, 4), kRunTolMm));
+  EXPECT_THAT(r->actual_pose(b1, 5), IsNearPose(shift * cp.nominal_pose(b1, 5), kRunTolMm));
+  EXPECT_THAT(r->actual_pose(b3, 5), IsNearPose(shift * cp.nominal_pose(b3, 5), kRunTolMm));
+  EXPECT_THAT(r->actual_pose(b3, 6), IsNearPose(cp.nominal_pose(b3, 6), kRunTolMm));
 }
 
 // Appendix VI: the trial-1 pose (rotation -1.67 degrees about the vertical X, translation
@@ -264,8 +264,8 @@ TEST(RunAppendixVI, RecoversATrialOnePoseFromConsistentImages) {
   EXPECT_NEAR(to_thesis(truth)(1, 2), -0.02910785, 1e-7);
   auto r = run(cp, readings_for(cp, 0, truth));
   ASSERT_TRUE(r) << r.error().message;
-  EXPECT_THAT(r->packages[0].verified, IsNearPose(truth, kTolMm));
-  EXPECT_THAT(r->actual_pose(2, 2), IsNearPose(truth, kTolMm));
+  EXPECT_THAT(r->packages[0].verified, IsNearPose(truth, kRunTolMm));
+  EXPECT_THAT(r->actual_pose(2, 2), IsNearPose(truth, kRunTolMm));
 }
 
 TEST(RunErrors, EveryUnmatchedOrMissingReadingIsNamed) {
@@ -302,7 +302,7 @@ TEST(RunThrough, EvaluatesUpToASituationWithTheReadingsTakenSoFar) {
   ASSERT_TRUE(part) << part.error().message;
   for (int b = 1; b <= cp.program.body_count(); ++b) {
     for (int s = 1; s <= 9; ++s) {
-      EXPECT_THAT(part->actual_pose(b, s), IsNearPose(whole.actual_pose(b, s), kTolMm))
+      EXPECT_THAT(part->actual_pose(b, s), IsNearPose(whole.actual_pose(b, s), kRunTolMm))
           << "body " << b << " situation " << s;
     }
     // Past it: not evaluated (the identity FM).

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "cell/rapt/parser.hpp"
+#include "cell/testing/tolerances.hpp"
 #include "support.hpp"
 
 namespace cell::rapt {
@@ -12,7 +13,7 @@ namespace {
 using testing::has_diagnostic;
 using ::testing::HasSubstr;
 
-constexpr double kTol = 1e-12;
+using ::cell::testing::kTol;
 
 Program analyze_text(const std::string& text, Diagnostics& d) {
   return analyze(parse(text, d), "test.rapt", d);

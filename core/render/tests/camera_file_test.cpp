@@ -6,6 +6,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/render/mount.hpp"
 #include "cell/testing/env.hpp"
@@ -17,7 +18,7 @@ namespace {
 using ::cell::testing::IsErrWith;
 using ::testing::HasSubstr;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 std::string shipped(const std::string& name) {
   return cell::testing::source_dir() + "/config/cameras/" + name;

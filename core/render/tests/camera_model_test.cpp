@@ -7,6 +7,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 
 namespace cell::render {
 namespace {
@@ -14,7 +15,7 @@ namespace {
 using ::cell::testing::IsErrWith;
 using ::testing::HasSubstr;
 
-constexpr double kTolPx = 1e-9;
+using ::cell::testing::kTolPx;
 
 // The 7545's true camera (config/cameras/ibm7545_eye.yaml): 512 x 484, 3.56 x 3.48 px/mm at
 // 420 mm, with a lens the thesis never modelled.

@@ -12,6 +12,7 @@
 #include "cell/render/truth.hpp"
 #include "cell/testing/matchers.hpp"
 #include "measure.hpp"
+#include "test_cameras.hpp"
 
 namespace cell::render {
 namespace {
@@ -22,26 +23,14 @@ using ::testing::HasSubstr;
 constexpr double kPi = std::numbers::pi;
 constexpr double kCornerTolPx = 0.05;  // the bound for an undistorted render
 
-/// A camera at `position` looking straight down (camera z = -world z), its x along world x
-/// turned by `yaw` about the vertical.
-Eigen::Isometry3d looking_down(const Eigen::Vector3d& position, double yaw = 0.0) {
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  pose.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix() *
-                  Eigen::Vector3d(1.0, -1.0, -1.0).asDiagonal();
-  pose.translation() = position;
-  return pose;
-}
+using testing::looking_down;
+using testing::pinhole;
 
 Eigen::Isometry3d part_pose(double x, double y, double z, double yaw) {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   pose.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   pose.translation() = Eigen::Vector3d(x, y, z);
   return pose;
-}
-
-// The thesis's figures: 512 x 484, 3.56 x 3.48 px/mm at 420 mm, centre (255, 241).
-CameraModel pinhole() {
-  return CameraModel::create(512, 484, 3.56 * 420, 3.48 * 420, 255.0, 241.0, {}).value();
 }
 
 CameraModel with_lens() {

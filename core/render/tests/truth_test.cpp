@@ -5,17 +5,16 @@
 
 #include <gtest/gtest.h>
 
+#include "cell/testing/tolerances.hpp"
+#include "test_cameras.hpp"
+
 namespace cell::render {
 namespace {
 
-constexpr double kTolPx = 1e-9;
+using ::cell::testing::kTolPx;
 
-Eigen::Isometry3d looking_down(const Eigen::Vector3d& position) {
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  pose.linear() = Eigen::Vector3d(1.0, -1.0, -1.0).asDiagonal();
-  pose.translation() = position;
-  return pose;
-}
+using testing::looking_down;
+using testing::pinhole;
 
 Part rectangle(const std::string& id, double x, double y, double yaw) {
   Part p;
@@ -28,10 +27,6 @@ Part rectangle(const std::string& id, double x, double y, double yaw) {
   p.world_T_part.translation() = Eigen::Vector3d(x, y, 0.0);
   p.world_T_part.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   return p;
-}
-
-CameraModel pinhole() {
-  return CameraModel::create(512, 484, 3.56 * 420, 3.48 * 420, 255.0, 241.0, {}).value();
 }
 
 // Under a camera looking straight down the top face is 416 mm away: its scale is f / 416.

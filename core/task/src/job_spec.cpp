@@ -9,11 +9,12 @@
 
 #include "cell/config/pose.hpp"
 #include "cell/config/yaml.hpp"
+#include "cell/geometry/angles.hpp"
 
 namespace cell::task {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 std::vector<Slot> read_slots(config::MapReader& r) {
   std::vector<Slot> slots;

@@ -7,6 +7,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
@@ -17,7 +18,7 @@ namespace {
 using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 struct Cell {
   kinematics::RobotModel ibm7545 = *kinematics::load_robot(cell::testing::source_dir() +

@@ -8,6 +8,7 @@
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
+#include "teach_test_support.hpp"
 
 namespace cell::teach {
 namespace {
@@ -18,21 +19,11 @@ using ::cell::testing::IsNearPose;
 using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 
-constexpr double kTolRad = 1e-9;
-constexpr double kTolMm = 1e-6;
-
-double deg(double d) { return d * std::numbers::pi / 180.0; }
-
-kinematics::RobotModel ibm7545() {
-  return kinematics::load_robot(cell::testing::source_dir() + "/config/robots/ibm7545.yaml")
-      .value();
-}
-
-kinematics::JointVector q7545(double j1, double j2, double z, double r) {
-  kinematics::JointVector q(4);
-  q << deg(j1), deg(j2), z, deg(r);
-  return q;
-}
+using test::deg;
+using test::ibm7545;
+using test::kTolMm;
+using test::kTolRad;
+using test::q7545;
 
 /// p1, close, p2 (line), wait 0.2, p3, open
 Task task3() {

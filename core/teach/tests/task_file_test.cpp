@@ -14,6 +14,7 @@
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
+#include "teach_test_support.hpp"
 
 namespace cell::teach {
 namespace {
@@ -23,24 +24,12 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 
-constexpr double kTolRad = 1e-9;
-constexpr double kTolMm = 1e-6;
-
-double deg(double d) { return d * std::numbers::pi / 180.0; }
-
-RobotLookup lookup() {
-  return [](const std::string& id) {
-    return kinematics::load_robot(cell::testing::source_dir() + "/config/robots/" + id + ".yaml");
-  };
-}
-
-kinematics::RobotModel ibm7545() { return lookup()("ibm7545").value(); }
-
-kinematics::JointVector q7545(double j1, double j2, double z, double r) {
-  kinematics::JointVector q(4);
-  q << deg(j1), deg(j2), z, deg(r);
-  return q;
-}
+using test::deg;
+using test::ibm7545;
+using test::kTolMm;
+using test::kTolRad;
+using test::lookup;
+using test::q7545;
 
 Task two_poses() {
   Task task;

@@ -8,14 +8,15 @@
 #include <vector>
 
 #include "fit.hpp"
+#include "support.hpp"
 
 namespace cell::vision {
 namespace {
 
-Error invalid(std::string what) { return Error{Errc::kInvalidArgument, std::move(what)}; }
+using detail::invalid;
 Error out_of_range(std::string what) { return Error{Errc::kOutOfRange, std::move(what)}; }
 
-Eigen::Vector2d perp(const Eigen::Vector2d& v) { return Eigen::Vector2d(-v.y(), v.x()); }
+using detail::perp;
 
 /// Liang-Barsky: the parameter interval [lo, hi] of p + t d inside [x0, x1] x [y0, y1],
 /// intersected with the given one; false when empty.

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "support.hpp"
+
 namespace cell::vision::detail {
 namespace {
 
@@ -13,8 +15,6 @@ Eigen::Vector2d principal(const Eigen::Matrix2d& s) {
   const double t = 0.5 * std::atan2(2.0 * s(0, 1), s(0, 0) - s(1, 1));
   return Eigen::Vector2d(std::cos(t), std::sin(t));
 }
-
-Eigen::Vector2d perp(const Eigen::Vector2d& v) { return Eigen::Vector2d(-v.y(), v.x()); }
 
 }  // namespace
 

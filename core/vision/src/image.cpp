@@ -11,10 +11,12 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
+#include "support.hpp"
+
 namespace cell::vision {
 namespace {
 
-Error invalid(std::string what) { return Error{Errc::kInvalidArgument, std::move(what)}; }
+using detail::invalid;
 
 enum class Format { kUnknown, kPng, kJpeg, kBmp, kPnm, kTiff };
 

@@ -8,33 +8,39 @@
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/vision/planar_7545.hpp"
 #include "fit.hpp"
 #include "segmentation.hpp"
+#include "support.hpp"
 
 namespace cell::vision {
-namespace {
-
-using detail::Blob;
-using detail::Circle2;
-using detail::Line2;
-using detail::Run;
-
-constexpr double kPi = std::numbers::pi;
-/// A crossing along a row (column) is used for a side whose normal is within 55 degrees of
-/// the row (column): beyond, the edge's spread across one pixel strip exceeds the window.
-constexpr double kScanCos = 0.5736;  // cos 55 deg
-
-Error invalid(std::string what) { return Error{Errc::kInvalidArgument, std::move(what)}; }
-
-Eigen::Vector2d perp(const Eigen::Vector2d& v) { return Eigen::Vector2d(-v.y(), v.x()); }
+namespace detail {
 
 /// A sub-pixel crossing of a blob's outline, found along a row (dir 0: bright to the left, 1:
-/// bright to the right) or a column (2: bright above, 3: bright below).
+/// bright to the right) or a column (2: bright above, 3: bright below). In detail rather than
+/// in the anonymous namespace: Locator::Impl holds them.
 struct Sample {
   Eigen::Vector2d px;
   std::uint8_t dir = 0;
 };
+
+}  // namespace detail
+
+namespace {
+
+using detail::Blob;
+using detail::Circle2;
+using detail::invalid;
+using detail::Line2;
+using detail::perp;
+using detail::Run;
+using detail::Sample;
+using geometry::kPi;
+
+/// A crossing along a row (column) is used for a side whose normal is within 55 degrees of
+/// the row (column): beyond, the edge's spread across one pixel strip exceeds the window.
+constexpr double kScanCos = 0.5736;  // cos 55 deg
 
 Eigen::Vector2d scan_outward(std::uint8_t dir) {
   switch (dir) {

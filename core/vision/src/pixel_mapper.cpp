@@ -8,6 +8,7 @@
 
 #include "cell/render/mount.hpp"
 #include "cell/vision/planar_7545.hpp"
+#include "support.hpp"
 
 namespace cell::vision {
 
@@ -28,7 +29,7 @@ struct PixelMapper::Grid {
 
 namespace {
 
-Error invalid(const std::string& what) { return Error{Errc::kInvalidArgument, what}; }
+using detail::invalid;
 
 std::string calibration_name(const calibration::CameraCalibration& c) {
   if (!c.version.empty()) {

@@ -6,10 +6,12 @@
 #include <cmath>
 #include <numbers>
 
+#include "cell/geometry/angles.hpp"
+
 namespace cell::vision {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
+using geometry::kPi;
 
 Status check_planar(const calibration::PlanarParameters& p) {
   if (!(p.c_x_px_per_mm > 0.0 && p.c_y_px_per_mm > 0.0 && std::isfinite(p.c_x_px_per_mm) &&
@@ -136,7 +138,7 @@ double thesis_alpha_deg(const Eigen::Vector2d& c0,
                         const Eigen::Vector2d& c2,
                         const Eigen::Vector2d& c3,
                         double aspect) noexcept {
-  constexpr double kDeg = 180.0 / kPi;  // the code's `pi` variable is 180/pi
+  constexpr double kDegPerRad = 180.0 / kPi;  // the code's `pi` variable is 180/pi
   double dy1 = (c0.y() - c1.y()) * aspect;
   const double dx1 = c0.x() - c1.x();
   double dy2 = (c2.y() - c3.y()) * aspect;
@@ -147,8 +149,8 @@ double thesis_alpha_deg(const Eigen::Vector2d& c0,
   if (dy2 == 0.0) {
     dy2 = 0.01;
   }
-  const double a1 = std::atan(dx1 / dy1) * kDeg;
-  const double a2 = std::atan(dx2 / dy2) * kDeg;
+  const double a1 = std::atan(dx1 / dy1) * kDegPerRad;
+  const double a2 = std::atan(dx2 / dy2) * kDegPerRad;
   const double temp = a1 - a2;
   if (temp > 150.0 || temp < -150.0) {
     return 90.0;
@@ -160,8 +162,8 @@ double thesis_roll_deg(double alpha_deg,
                        double j1_rad,
                        double j2_rad,
                        double angl_err_rad) noexcept {
-  constexpr double kDeg = 180.0 / kPi;
-  double o = -(alpha_deg + (j1_rad + j2_rad) * kDeg - 90.0 - angl_err_rad * kDeg);
+  constexpr double kDegPerRad = 180.0 / kPi;
+  double o = -(alpha_deg + (j1_rad + j2_rad) * kDegPerRad - 90.0 - angl_err_rad * kDegPerRad);
   if (o > 90.0) {
     o -= 180.0;
   }

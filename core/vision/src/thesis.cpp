@@ -6,11 +6,12 @@
 #include <cmath>
 
 #include "cell/vision/planar_7545.hpp"
+#include "support.hpp"
 
 namespace cell::vision {
 namespace {
 
-Error invalid(std::string what) { return Error{Errc::kInvalidArgument, std::move(what)}; }
+using detail::invalid;
 
 int dist2(const ThesisPixel& a, const ThesisPixel& b) {
   const int dx = a.x() - b.x();

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <numbers>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/vision/locate.hpp"
 #include "scenes.hpp"
 
@@ -22,7 +23,7 @@ using testing::RenderedScene;
 using testing::ScatterRequest;
 using testing::Score;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 constexpr double kCentreRmsPx = 0.1;      // without leads
 constexpr double kCentreRmsPinsPx = 0.3;  // with leads
 constexpr double kAngleRmsDeg = 0.2;

@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 #include "scenes.hpp"
 
 namespace cell::vision {
@@ -17,7 +18,7 @@ using testing::Cell;
 using ::testing::HasSubstr;
 using testing::Lights;
 
-constexpr double kTolPx = 1e-9;
+using ::cell::testing::kTolPx;
 
 TEST(WindowSuggester, SpansTheToleranceAcrossAndCutsItAlong) {
   const auto w = suggest_window({100.0, 100.0}, {200.0, 100.0}, 5.0, 512, 484);

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/vision/locate.hpp"
 #include "scenes.hpp"
 
@@ -19,8 +20,8 @@ using testing::dip14_grasp_model;
 using ::testing::HasSubstr;
 using testing::Lights;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
-constexpr double kTolMm = 1e-3;
+using geometry::kDeg;
+constexpr double kPrintedMm = 1e-3;  // the digest prints three decimals
 
 // T4: C = (200, 150), angle.aim = 30, alpha = 0, d.cg = 0, rz.off = 90, wd_LA = 40, wd_g = 10
 // -> beta 30, G = C, grasp.angle 120, dg 25, cw1 (212.500, 128.349), cw2 (187.500, 171.651).
@@ -31,10 +32,10 @@ TEST(Fingerprints, OnAxisGraspMatchesTheDigestsT4) {
   EXPECT_NEAR((f.grasp - Eigen::Vector2d(200.0, 150.0)).norm(), 0.0, 1e-12);
   EXPECT_NEAR(f.grasp_angle_rad, 120.0 * kDeg, 1e-12);
   EXPECT_NEAR(f.dg_mm, 25.0, 1e-12);
-  EXPECT_NEAR(f.cw1.x(), 212.500, kTolMm);
-  EXPECT_NEAR(f.cw1.y(), 128.349, kTolMm);
-  EXPECT_NEAR(f.cw2.x(), 187.500, kTolMm);
-  EXPECT_NEAR(f.cw2.y(), 171.651, kTolMm);
+  EXPECT_NEAR(f.cw1.x(), 212.500, kPrintedMm);
+  EXPECT_NEAR(f.cw1.y(), 128.349, kPrintedMm);
+  EXPECT_NEAR(f.cw2.x(), 187.500, kPrintedMm);
+  EXPECT_NEAR(f.cw2.y(), 171.651, kPrintedMm);
   // The windows are wd_g x ht_g rectangles about cw1, cw2, turned by grasp.angle.
   EXPECT_NEAR((f.window1[1] - f.window1[0]).norm(), 10.0, 1e-9);
   EXPECT_NEAR((f.window1[3] - f.window1[0]).norm(), 20.0, 1e-9);
@@ -49,13 +50,13 @@ TEST(Fingerprints, OffCentreGraspMatchesTheDigestsT5) {
   const GraspStyle style{"t5", 10.0, 90.0 * kDeg, 90.0 * kDeg, 40.0};
   const auto f = place_fingerprints({200.0, 150.0}, 30.0 * kDeg, style, 10.0, 20.0);
   EXPECT_NEAR(f.beta_rad, 120.0 * kDeg, 1e-12);
-  EXPECT_NEAR(f.grasp.x(), 205.000, kTolMm);
-  EXPECT_NEAR(f.grasp.y(), 141.340, kTolMm);
+  EXPECT_NEAR(f.grasp.x(), 205.000, kPrintedMm);
+  EXPECT_NEAR(f.grasp.y(), 141.340, kPrintedMm);
   EXPECT_NEAR(f.grasp_angle_rad, 210.0 * kDeg, 1e-12);
-  EXPECT_NEAR(f.cw1.x(), 226.651, kTolMm);
-  EXPECT_NEAR(f.cw1.y(), 153.840, kTolMm);
-  EXPECT_NEAR(f.cw2.x(), 183.349, kTolMm);
-  EXPECT_NEAR(f.cw2.y(), 128.840, kTolMm);
+  EXPECT_NEAR(f.cw1.x(), 226.651, kPrintedMm);
+  EXPECT_NEAR(f.cw1.y(), 153.840, kPrintedMm);
+  EXPECT_NEAR(f.cw2.x(), 183.349, kPrintedMm);
+  EXPECT_NEAR(f.cw2.y(), 128.840, kPrintedMm);
 }
 
 // T6: wd_g 10, ht_g 20 mm at 1 mm/px -> 200 px; at 0.5 mm/px 800 px. err 5: (198, 200)
@@ -142,8 +143,8 @@ TEST(Fingerprints, EveryClearStyleIsListedWithWhereTheToolGoes) {
   EXPECT_NEAR(r.clear[1].tool_yaw_rad, -60.0 * kDeg, 1e-12);  // the part's angle - 90 deg
   EXPECT_EQ(r.clear[2].style, 2);
   EXPECT_EQ(r.clear[2].name, "offset");
-  EXPECT_NEAR(r.clear[2].grasp.x(), 195.670, kTolMm);  // 5 mm from C along -MIA
-  EXPECT_NEAR(r.clear[2].grasp.y(), 147.500, kTolMm);
+  EXPECT_NEAR(r.clear[2].grasp.x(), 195.670, kPrintedMm);  // 5 mm from C along -MIA
+  EXPECT_NEAR(r.clear[2].grasp.y(), 147.500, kPrintedMm);
   EXPECT_NEAR((r.clear[2].grasp - Eigen::Vector2d(200.0, 150.0)).norm(), 5.0, 1e-12);
   EXPECT_NEAR(r.clear[2].tool_yaw_rad, 30.0 * kDeg, 1e-12);
 

@@ -19,7 +19,7 @@ using ::cell::testing::IsErrWith;
 using ::testing::HasSubstr;
 using vision::testing::Cell;
 
-constexpr double kTolMm = 1e-3;
+constexpr double kMapTolMm = 1e-3;
 
 Eigen::Isometry3d camera_pose(const Cell& cell, const std::vector<double>& joints) {
   kinematics::JointVector q(4);
@@ -54,8 +54,8 @@ TEST(PixelMapper, TrueCalibrationMapsPixelsBackToTheirWorldPoints) {
     const auto xy = mapper.to_plane(*px, h);
     ASSERT_TRUE(xy) << xy.error().message;
     const Eigen::Vector3d p_base = cell.world_T_base().inverse() * p_world;
-    EXPECT_NEAR(xy->x(), p_base.x(), kTolMm);
-    EXPECT_NEAR(xy->y(), p_base.y(), kTolMm);
+    EXPECT_NEAR(xy->x(), p_base.x(), kMapTolMm);
+    EXPECT_NEAR(xy->y(), p_base.y(), kMapTolMm);
     const auto back = mapper.to_pixel(*xy, h);
     ASSERT_TRUE(back);
     EXPECT_NEAR((*back - *px).norm(), 0.0, 2e-3);  // the grid's bilinear error, in pixels
@@ -81,7 +81,7 @@ TEST(PixelMapper, AWallsTopAndBottomMapToTheSamePoint) {
   const auto a = mapper.to_plane(*bottom, 0.51);
   const auto b = mapper.to_plane(*top, 3.81);
   ASSERT_TRUE(a && b);
-  EXPECT_NEAR((*a - *b).norm(), 0.0, kTolMm);
+  EXPECT_NEAR((*a - *b).norm(), 0.0, kMapTolMm);
   // The nadir: the point under the camera.
   const Eigen::Vector3d camera_base = cell.world_T_base().inverse() * w_T_c.translation();
   EXPECT_NEAR((mapper.nadir() - camera_base.head<2>()).norm(), 0.0, 1e-9);

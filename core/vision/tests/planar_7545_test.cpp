@@ -7,6 +7,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/testing/matchers.hpp"
 #include "cell/vision/pixel_mapper.hpp"
 #include "cell/vision/thesis.hpp"
@@ -16,8 +17,8 @@ namespace {
 
 using ::cell::testing::IsErr;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
-constexpr double kTolMm = 0.02;  // the digest prints two decimals
+using geometry::kDeg;
+constexpr double kDigestTolMm = 0.02;  // the digest prints two decimals
 
 /// The code's defaults (digest 000 §4): c_x 3.56, c_y 3.48 px/mm, Ref_Point (3, 457), centre
 /// (255, 241), d_t_c 81.8 mm, b_angl 137.7 deg, angl_err 1.8 deg, links 400 / 250, D 420.
@@ -46,8 +47,8 @@ constexpr double kJ2 = 46662.0 / 444.444 * kDeg;
 TEST(Planar7545, RefPointMapsToTheDigestsCase8) {
   const auto xy = planar_pixel_to_base(thesis_planar(), kJ1, kJ2, {3.0, 457.0});
   ASSERT_TRUE(xy) << xy.error().message;
-  EXPECT_NEAR(xy->x(), 41.51, kTolMm);
-  EXPECT_NEAR(xy->y(), 485.81, kTolMm);
+  EXPECT_NEAR(xy->x(), 41.51, kDigestTolMm);
+  EXPECT_NEAR(xy->y(), 485.81, kDigestTolMm);
 }
 
 // Case 9: the centre pixel (255, 241) -> (134.39, 501.25) mm; cases 10: two more pixels.
@@ -60,8 +61,8 @@ TEST(Planar7545, PixelsMapToTheDigestsCases9And10) {
                         Case{{400, 100}, {190.35, 514.21}}}) {
     const auto xy = planar_pixel_to_base(thesis_planar(), kJ1, kJ2, c.px);
     ASSERT_TRUE(xy) << xy.error().message;
-    EXPECT_NEAR(xy->x(), c.mm.x(), kTolMm) << c.px.transpose();
-    EXPECT_NEAR(xy->y(), c.mm.y(), kTolMm) << c.px.transpose();
+    EXPECT_NEAR(xy->x(), c.mm.x(), kDigestTolMm) << c.px.transpose();
+    EXPECT_NEAR(xy->y(), c.mm.y(), kDigestTolMm) << c.px.transpose();
   }
 }
 
@@ -154,8 +155,8 @@ TEST(PixelMapperPlanar, MapsThroughTheThesisFormulasWithParallax) {
   ASSERT_TRUE(q);
   const auto base = m->to_base(*q, 0.0);
   ASSERT_TRUE(base);
-  EXPECT_NEAR(base->x_mm, 134.39, kTolMm);
-  EXPECT_NEAR(base->y_mm, 501.25, kTolMm);
+  EXPECT_NEAR(base->x_mm, 134.39, kDigestTolMm);
+  EXPECT_NEAR(base->y_mm, 501.25, kDigestTolMm);
   // A top face 8.5 mm up seen at (0, 0) lies over the table pixel (5, 5) (case 12).
   const auto top = m->to_plane({0.0, 0.0}, 8.5);
   const auto table = m->to_plane({255.0 * 8.5 / 420.0, 241.0 * 8.5 / 420.0}, 0.0);

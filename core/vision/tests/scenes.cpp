@@ -8,6 +8,7 @@
 #include <numbers>
 #include <stdexcept>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/render/mount.hpp"
 #include "cell/render/renderer.hpp"
@@ -21,7 +22,7 @@
 namespace cell::vision::testing {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 std::string home() {
   const char* env = std::getenv("CELL_SOURCE_DIR");
@@ -181,7 +182,6 @@ std::vector<Cell::ClearGraspScene> Cell::clear_grasp_scenes() const {
 }
 
 GraspModel dip14_grasp_model() {
-  constexpr double kDeg = std::numbers::pi / 180.0;
   GraspModel model;
   model.class_name = "dip14";
   model.finger_width_mm = 3.0;

@@ -8,10 +8,12 @@
 #include <numbers>
 #include <opencv2/imgproc.hpp>
 
+#include "cell/geometry/angles.hpp"
+
 namespace cell::vision {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 cv::Mat white(int w = 512, int h = 484) { return cv::Mat(h, w, CV_8UC1, cv::Scalar(220)); }
 

@@ -10,6 +10,7 @@
 
 #include "cell/geometry/pose.hpp"
 #include "cell/world/footprint.hpp"
+#include "checks.hpp"
 
 namespace cell::world {
 namespace {
@@ -23,7 +24,7 @@ Error invalid(const std::string& name, const std::string& what) {
   return Error{Errc::kInvalidArgument, fmt::format("part class '{}': {}", name, what)};
 }
 
-bool finite_positive(double v) { return std::isfinite(v) && v > 0.0; }
+using detail::finite_positive;
 
 /// Closed box mesh [x0, x1] x [y0, y1] x [z0, z1], faces counter-clockwise from outside.
 Mesh box_mesh(double x0, double x1, double y0, double y1, double z0, double z1) {

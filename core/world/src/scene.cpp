@@ -17,15 +17,15 @@
 #include "cell/config/yaml.hpp"
 #include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
+#include "checks.hpp"
 
 namespace cell::world {
 namespace {
 
 using geometry::deg_to_rad;
 
-constexpr double kMaxCoordinateMm = 1e6;  // 1 km: anything beyond is a typo
-
-bool finite_positive(double v) { return std::isfinite(v) && v > 0.0; }
+using detail::finite_positive;
+using detail::kMaxCoordinateMm;
 
 void check_range(config::MapReader& r, const char* key, const std::array<double, 2>& range) {
   if (!(range[0] < range[1])) {

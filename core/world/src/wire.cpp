@@ -10,7 +10,8 @@
 namespace cell::world {
 namespace {
 
-constexpr double kUprightCos = 0.99984769515639127;  // cos(1 deg)
+// A part within 1 deg of upright is spawned by x, y and yaw (cos 1 deg).
+constexpr double kSpawnUprightCos = 0.99984769515639127;
 constexpr double kSizeTolMm = 0.01;
 
 const WorldStateWire::MeshStorage& mesh_of(const std::shared_ptr<const PartClass>& cls,
@@ -176,7 +177,7 @@ Result<PartPlacement> placement_from_idl(const cell_world_WorldPart& part) {
   if (!pose) {
     return with_context(std::move(pose).error(), fmt::format("part '{}' world_T_part", p.id));
   }
-  if (pose->linear()(2, 2) >= kUprightCos) {
+  if (pose->linear()(2, 2) >= kSpawnUprightCos) {
     p.x_mm = pose->translation().x();
     p.y_mm = pose->translation().y();
     p.yaw = std::atan2(pose->linear()(1, 0), pose->linear()(0, 0));

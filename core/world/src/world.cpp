@@ -11,17 +11,18 @@
 
 #include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
+#include "checks.hpp"
 
 namespace cell::world {
 namespace {
 
+using detail::kMaxCoordinateMm;
 using geometry::rad_to_deg;
 
 // A part released this far below a surface was pushed into it (a tool driven a little too
 // deep): it comes to rest on that surface rather than falling through to the one beneath.
 constexpr double kSupportEpsMm = 50.0;
 constexpr double kFloorHeightMm = 0.0;    // the world's floor (scene.hpp)
-constexpr double kMaxCoordinateMm = 1e6;  // 1 km: beyond is a typo or garbage
 constexpr double kUprightCos = 1.0 - 1e-9;
 constexpr double kGridCellMm = 50.0;
 

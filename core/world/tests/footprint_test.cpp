@@ -8,10 +8,12 @@
 #include <random>
 #include <set>
 
+#include "cell/testing/tolerances.hpp"
+
 namespace cell::world {
 namespace {
 
-constexpr double kTolMm = 1e-9;
+using ::cell::testing::kTolMm;
 
 Footprint square(double x, double y, double side, double yaw = 0.0) {
   const double h = side / 2.0;

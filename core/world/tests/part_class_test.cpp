@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 #include "cell/world/footprint.hpp"
 
 namespace cell::world {
@@ -20,7 +21,7 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 
-constexpr double kTolMm = 1e-9;
+using ::cell::testing::kTolMm;
 
 /// Signed area of a polygon (> 0 when counter-clockwise).
 double signed_area(const std::vector<Eigen::Vector2d>& p) {

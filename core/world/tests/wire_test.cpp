@@ -18,7 +18,7 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsNearPose;
 using ::cell::testing::IsOk;
 
-World make_world(const std::string& yaml) {
+World world_without_robots(const std::string& yaml) {
   const Catalogue cat = Catalogue::standard();
   auto scene = parse_scene(yaml, "wire.yaml", cat);
   EXPECT_THAT(scene, IsOk());
@@ -40,7 +40,7 @@ const std::string kScene =
     "  - {id: c, class: chip, x_mm: 1000, y_mm: 300}\n";
 
 TEST(Wire, AWorldStateCarriesEveryPartAndBelt) {
-  World w = make_world(kScene);
+  World w = world_without_robots(kScene);
   WorldStateWire wire;
   fill_world_state(w, 123456789, 7, wire);
   const cell_world_WorldState& m = wire.message;
@@ -88,7 +88,7 @@ TEST(Wire, AWorldStateCarriesEveryPartAndBelt) {
 }
 
 TEST(Wire, BeltStateFollowsTheWorld) {
-  World w = make_world(kScene);
+  World w = world_without_robots(kScene);
   std::vector<WorldEvent> events;
   for (int i = 0; i < 100; ++i) {
     w.step(0.01, events);
@@ -102,7 +102,7 @@ TEST(Wire, BeltStateFollowsTheWorld) {
 }
 
 TEST(Wire, ClientsRebuildTheClassesTheyDraw) {
-  World w = make_world(kScene);
+  World w = world_without_robots(kScene);
   WorldStateWire wire;
   fill_parts(w, wire);
   const Catalogue standard = Catalogue::standard();
@@ -132,7 +132,7 @@ TEST(Wire, ClientsRebuildTheClassesTheyDraw) {
 }
 
 TEST(Wire, SpawnPlacementsFromWorldParts) {
-  World w = make_world(kScene);
+  World w = world_without_robots(kScene);
   WorldStateWire wire;
   fill_parts(w, wire);
   auto p = placement_from_idl(wire.parts[0]);

@@ -12,6 +12,7 @@
 #include "cell/geometry/angles.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
 
 namespace cell::world {
 namespace {
@@ -22,7 +23,7 @@ using ::cell::testing::IsOk;
 using geometry::deg_to_rad;
 using ::testing::HasSubstr;
 
-constexpr double kTolMm = 1e-9;
+using ::cell::testing::kTolMm;
 constexpr double kTableZ = 750.0;
 
 Eigen::Isometry3d translation(double x, double y, double z) {

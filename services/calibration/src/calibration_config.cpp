@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/service/paths.hpp"
@@ -17,7 +18,7 @@
 namespace cell::calibration_service {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 Eigen::Isometry3d read_pose(config::MapReader& parent, const std::string& key) {
   config::MapReader r = parent.child(key, true);

@@ -18,6 +18,7 @@
 #include "cell/calibration/pose_set.hpp"
 #include "cell/common/log.hpp"
 #include "cell/config/yaml.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/geometry/pose.hpp"
 #include "cell/render/mount.hpp"
 #include "cell/service/paths.hpp"
@@ -26,7 +27,7 @@ namespace cell::calibration_service {
 namespace {
 
 namespace cal = cell::calibration;
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 std::string yaml_quote(const std::string& s) { return YAML::Dump(YAML::Node(s)); }
 

@@ -16,6 +16,7 @@
 #include "calibration_service.hpp"
 #include "cell/bus/request_reply.hpp"
 #include "cell/calibration/pixel_mapping.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/render/mount.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
@@ -33,7 +34,7 @@ using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 using namespace std::chrono_literals;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 std::string base_yaml(const std::string& store, const std::string& extra = {}) {
   const std::string home = cell::testing::source_dir();

@@ -11,8 +11,10 @@
 
 #include "cell/bus/request_reply.hpp"
 #include "cell/common/time.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/service_harness.hpp"
+#include "config_fixtures.hpp"
 #include "world_fixtures.hpp"
 
 namespace cell::camera {
@@ -24,15 +26,9 @@ using testing::WorldStateWire;
 
 using namespace std::chrono_literals;
 constexpr auto kWait = std::chrono::seconds(5);
-constexpr double kDeg = 3.14159265358979323846 / 180.0;
+using geometry::kDeg;
 
-CameraConfig config_from(const std::string& yaml) {
-  auto doc = config::load_string(yaml, "camera.yaml");
-  EXPECT_TRUE(doc);
-  auto c = load_config(*doc);
-  EXPECT_TRUE(c) << c.error().message;
-  return *c;
-}
+using testing::config_from;
 
 CameraConfig eye_config() {
   const std::string home = cell::testing::source_dir();

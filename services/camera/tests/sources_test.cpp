@@ -13,6 +13,7 @@
 #include "cell/config/yaml.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
+#include "config_fixtures.hpp"
 
 namespace cell::camera {
 namespace {
@@ -40,13 +41,7 @@ class TempDir {
   std::filesystem::path path_;
 };
 
-CameraConfig config_from(const std::string& yaml) {
-  auto doc = config::load_string(yaml, "camera.yaml");
-  EXPECT_TRUE(doc);
-  auto c = load_config(*doc);
-  EXPECT_TRUE(c) << c.error().message;
-  return *c;
-}
+using testing::config_from;
 
 TEST(FileSource, ReplaysTheDirectoryInNameOrderAsMono8) {
   TempDir dir;

@@ -11,6 +11,7 @@
 #include <numbers>
 #include <thread>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/motion/planner.hpp"
 #include "cell/protocols/excalibur/angles.hpp"
@@ -29,7 +30,7 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 constexpr double kTolRad = 1e-12;
 
 kinematics::RobotModel excalibur_model() {

@@ -11,6 +11,7 @@
 
 #include "cell/bus/reader.hpp"
 #include "cell/bus/view.hpp"
+#include "cell/geometry/angles.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/protocols/excalibur/serial_port.hpp"
 #include "cell/testing/env.hpp"
@@ -29,7 +30,7 @@ using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 using Harness = cell::testing::ServiceHarness<SimExcaliburConfig, SimExcaliburService>;
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using geometry::kDeg;
 
 Result<SimExcaliburConfig> parse(const std::string& yaml) {
   auto doc = config::load_string(yaml, "sim.yaml");

@@ -56,7 +56,9 @@ async function freePort() {
 }
 
 export class Cell {
-  /// options: {robots: ['ibm7545', 'scara_picker'], camera: true, extraServices: [...]}
+  /// options: {robots: ['ibm7545', 'scara_picker'], camera: true, extraServices: [...],
+  ///   jobMaxParts: N (the page's table_ics template takes at most N parts; default: the
+  ///   shipped job's max_parts)}
   constructor(options = {}) {
     this.bin = process.env.CELL_BIN_DIR;
     this.src = process.env.CELL_SOURCE_DIR;
@@ -104,7 +106,13 @@ export class Cell {
       ibm7545: '{id: ibm7545, config: config/robots/ibm7545.yaml, xyz_mm: [0, 0, 981.51]}',
       scara_picker: '{id: scara_picker, config: config/robots/scara_picker.yaml, xyz_mm: [1000, 0, 960]}',
     };
-    const jobFile = join(this.src, 'config/jobs/table_ics.yaml');
+    let jobFile = join(this.src, 'config/jobs/table_ics.yaml');
+    if (existsSync(jobFile) && this.options.jobMaxParts) {
+      const spec = readFileSync(jobFile, 'utf8');
+      if (!/^max_parts: \d+/m.test(spec)) throw new Error(`${jobFile} has no max_parts line`);
+      jobFile = this.write('table_ics.yaml',
+        spec.replace(/^max_parts: \d+/m, `max_parts: ${this.options.jobMaxParts}`));
+    }
     this.write('monitor.yaml', [
       'service: {id: monitor, heartbeat_period_s: 0.5}',
       `http: {bind: 127.0.0.1, port: ${this.port}}`,
@@ -114,7 +122,7 @@ export class Cell {
       'robots:',
       ...this.options.robots.map((r) => `  - ${robots[r]}`),
       'cameras: [config/cameras/ibm7545_eye.yaml, config/cameras/belt_cam.yaml]',
-      ...(existsSync(jobFile) ? ['job_templates:', '  - {name: table_ics, spec_file: config/jobs/table_ics.yaml}'] : []),
+      ...(existsSync(jobFile) ? ['job_templates:', `  - {name: table_ics, spec_file: ${jobFile}}`] : []),
       `teach: {tasks_dir: ${this.dir}/tasks}`,
       '',
     ].join('\n'));

@@ -6,6 +6,8 @@
 #include <cmath>
 
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
+#include "shipped_dialect.hpp"
 
 namespace cell::protocols::excalibur {
 namespace {
@@ -13,9 +15,9 @@ namespace {
 using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 
-constexpr double kTolDeg = 1e-9;
+using ::cell::testing::kTolDeg;
 
-Dialect shipped() { return *Dialect::load(CELL_EXCALIBUR_DIALECT); }
+using test::shipped;
 
 ControllerSettings settings() {
   ControllerSettings s;

@@ -9,10 +9,13 @@
 #include <numbers>
 #include <sstream>
 
+#include "cell/geometry/angles.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/protocols/excalibur/angles.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
+#include "cell/testing/tolerances.hpp"
+#include "shipped_dialect.hpp"
 
 namespace cell::protocols::excalibur {
 namespace {
@@ -21,8 +24,8 @@ using ::cell::testing::IsErrWith;
 using ::cell::testing::IsOk;
 using ::testing::HasSubstr;
 
-constexpr double kTolDeg = 1e-9;
-constexpr double kDeg = std::numbers::pi / 180.0;
+using ::cell::testing::kTolDeg;
+using geometry::kDeg;
 
 std::string shipped_text() {
   std::ifstream in(CELL_EXCALIBUR_DIALECT);
@@ -31,11 +34,7 @@ std::string shipped_text() {
   return s.str();
 }
 
-Dialect shipped() {
-  auto d = Dialect::load(CELL_EXCALIBUR_DIALECT);
-  EXPECT_THAT(d, IsOk());
-  return *d;
-}
+using test::shipped;
 
 /// The shipped file with `from` replaced by `to` (which must occur).
 Result<Dialect> edited(const std::string& from, const std::string& to) {

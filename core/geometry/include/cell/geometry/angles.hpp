@@ -8,6 +8,10 @@ namespace cell::geometry {
 /// pi, for readability at call sites.
 inline constexpr double kPi = std::numbers::pi;
 
+/// One degree in radians: `x_deg * kDeg` is radians. Use only at the edges (config, CLI,
+/// protocols that speak degrees, tests written in the thesis's degrees).
+inline constexpr double kDeg = kPi / 180.0;
+
 /// Degrees to radians. Use only at the edges (config, CLI, protocols that speak degrees).
 constexpr double deg_to_rad(double deg) noexcept { return deg * (kPi / 180.0); }
 
