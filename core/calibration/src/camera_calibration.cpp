@@ -346,7 +346,8 @@ cell_calibration_CameraCalibration to_idl(const CameraCalibration& c, IdlHolder&
 Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) {
   CameraCalibration c;
   c.camera_id = std::string(bus::str(m.camera_id));
-  switch (m.model) {
+  // Any value may come off the wire: the enums are read as integers (bus::raw).
+  switch (bus::raw(m.model)) {
     case cell_calibration_CAMERA_PINHOLE:
       c.model = ModelType::kPinhole;
       break;
@@ -354,9 +355,9 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
       c.model = ModelType::kPlanar7545;
       break;
     default:
-      return invalid_camera(c.camera_id, fmt::format("unknown model type {}", static_cast<int>(m.model)));
+      return invalid_camera(c.camera_id, fmt::format("unknown model type {}", bus::raw(m.model)));
   }
-  switch (m.mounting) {
+  switch (bus::raw(m.mounting)) {
     case cell_calibration_MOUNT_FIXED:
       c.mounting = Mounting::kFixed;
       break;
@@ -364,8 +365,7 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
       c.mounting = Mounting::kEyeInHand;
       break;
     default:
-      return invalid_camera(c.camera_id,
-                     fmt::format("unknown mounting {}", static_cast<int>(m.mounting)));
+      return invalid_camera(c.camera_id, fmt::format("unknown mounting {}", bus::raw(m.mounting)));
   }
   const std::string_view frame = bus::str(m.mount_frame);
   if (c.mounting == Mounting::kEyeInHand) {

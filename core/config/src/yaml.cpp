@@ -59,8 +59,9 @@ std::string location(const std::string& path, const YAML::Node& node) {
   return fmt::format("{}:{}:{}", path, node.Mark().line + 1, node.Mark().column + 1);
 }
 
-MapReader::MapReader(std::shared_ptr<const Document> doc, YAML::Node map, std::string prefix)
-    : doc_(std::move(doc)), map_(std::move(map)), prefix_(std::move(prefix)) {
+// A YAML::Node is a handle (it has no move constructor): copying it shares the node.
+MapReader::MapReader(std::shared_ptr<const Document> doc, const YAML::Node& map, std::string prefix)
+    : doc_(std::move(doc)), map_(map), prefix_(std::move(prefix)) {
   if (!map_.IsDefined() || map_.IsNull()) {
     map_ = YAML::Node(YAML::NodeType::Map);
   } else if (!map_.IsMap()) {
@@ -70,8 +71,8 @@ MapReader::MapReader(std::shared_ptr<const Document> doc, YAML::Node map, std::s
   }
 }
 
-MapReader::MapReader(const Document& doc, YAML::Node map, std::string prefix)
-    : MapReader(std::make_shared<const Document>(doc), std::move(map), std::move(prefix)) {}
+MapReader::MapReader(const Document& doc, const YAML::Node& map, std::string prefix)
+    : MapReader(std::make_shared<const Document>(doc), map, std::move(prefix)) {}
 
 std::string MapReader::dotted(const std::string& key) const {
   return prefix_.empty() ? key : prefix_ + "." + key;

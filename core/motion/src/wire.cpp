@@ -75,9 +75,10 @@ Result<Plan> from_idl(const cell_motion_Trajectory& message, int dof) {
   Plan plan;
   plan.trajectory = std::move(*traj);
   for (const auto& e : bus::span(message.events)) {
-    if (e.kind != cell_motion_EVENT_GRIPPER_CLOSE && e.kind != cell_motion_EVENT_GRIPPER_OPEN) {
+    const auto kind = bus::raw(e.kind);  // any value may come off the wire
+    if (kind != cell_motion_EVENT_GRIPPER_CLOSE && kind != cell_motion_EVENT_GRIPPER_OPEN) {
       return Error{Errc::kInvalidArgument,
-                   fmt::format("trajectory event has unknown kind {}", static_cast<int>(e.kind))};
+                   fmt::format("trajectory event has unknown kind {}", kind)};
     }
     if (!std::isfinite(e.time_from_start_s) || !std::isfinite(e.dwell_s) || e.dwell_s < 0 ||
         e.time_from_start_s < 0 || e.time_from_start_s > plan.trajectory.duration_s() + 1e-9) {

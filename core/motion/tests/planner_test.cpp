@@ -64,7 +64,7 @@ TEST(Planner, PickDescendsClosesDwellsAndDeparts) {
   auto end = model.forward(plan->trajectory.end());
   EXPECT_THAT(*end, ::cell::testing::IsNearPose(planner.above(grasp, 27.7), 1e-6));
   for (double t = e.t_s - 0.3; t < e.t_s; t += 0.01) {
-    auto p = model.forward(plan->trajectory.sample(t).q)->translation();
+    const Eigen::Vector3d p = model.forward(plan->trajectory.sample(t).q)->translation();
     EXPECT_NEAR(p.x(), grasp.translation().x(), 1e-3) << "t=" << t;
     EXPECT_NEAR(p.y(), grasp.translation().y(), 1e-3) << "t=" << t;
   }

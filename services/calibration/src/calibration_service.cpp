@@ -1,9 +1,10 @@
 #include "calibration_service.hpp"
 
-#include <chrono>
-#include <exception>
-
 #include <fmt/format.h>
+
+#include <chrono>
+#include <cstring>
+#include <exception>
 
 #include "cell/bus/view.hpp"
 #include "cell/bus/waitset.hpp"
@@ -54,8 +55,8 @@ Result<std::optional<cal::BoardSpec>> board_of(const cell_calibration_BoardTarge
 
 }  // namespace
 
-std::string_view procedure_name(cell_calibration_CalibrationProcedure p) noexcept {
-  switch (p) {
+std::string_view procedure_name(const cell_calibration_CalibrationProcedure& field) noexcept {
+  switch (bus::raw(field)) {  // any value may come off the wire
     case cell_calibration_PROCEDURE_INTRINSICS:
       return "intrinsics";
     case cell_calibration_PROCEDURE_HAND_EYE:
@@ -172,9 +173,13 @@ void CalibrationService::progress(const Key& key, cell_calibration_CalibrationPr
   }
 }
 
-void CalibrationService::result(const Key& key, cell_calibration_CalibrationProcedure p,
-                                const std::string& device, const Outcome* outcome,
-                                const Error* error, const std::string& version, bool stored,
+void CalibrationService::result(const Key& key,
+                                const cell_calibration_CalibrationProcedure& p,
+                                const std::string& device,
+                                const Outcome* outcome,
+                                const Error* error,
+                                const std::string& version,
+                                bool stored,
                                 double elapsed_s) {
   std::string code;
   std::string reason;
@@ -248,7 +253,7 @@ void CalibrationService::result(const Key& key, cell_calibration_CalibrationProc
   m.status.accepted = error == nullptr;
   m.status.error_code = bus::borrow(code);
   m.status.reason = bus::borrow(reason);
-  m.procedure = p;
+  std::memcpy(&m.procedure, &p, sizeof p);  // as received (see result's declaration)
   m.device_id = bus::borrow(device);
   m.version = bus::borrow(version);
   m.stored = stored;
@@ -320,7 +325,7 @@ void CalibrationService::handle(const cell_calibration_CalibrationRequest& r) {
     refuse(Errc::kInvalidArgument,
            fmt::format("unknown procedure {} (intrinsics, hand_eye, belt, planar, list, show, "
                        "rollback, cancel)",
-                       static_cast<int>(r.procedure)));
+                       bus::raw(r.procedure)));
     return;
   }
   if (immediate(r.procedure)) {

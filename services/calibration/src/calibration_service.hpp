@@ -67,10 +67,16 @@ class CalibrationService {
                 const std::string& device, std::string_view stage, std::size_t step,
                 std::size_t total, std::string_view message);
   /// Writes a CalibrationResult. `outcome` (for an accepted one) fills the figures; `error`
-  /// a refusal or failure.
-  void result(const Key& key, cell_calibration_CalibrationProcedure procedure,
-              const std::string& device, const Outcome* outcome, const Error* error,
-              const std::string& version, bool stored, double elapsed_s);
+  /// a refusal or failure. `procedure` is echoed as received, bytes and all (it may be a value
+  /// the contract does not know: the refusal of an unknown procedure).
+  void result(const Key& key,
+              const cell_calibration_CalibrationProcedure& procedure,
+              const std::string& device,
+              const Outcome* outcome,
+              const Error* error,
+              const std::string& version,
+              bool stored,
+              double elapsed_s);
 
   service::Context& ctx_;
   CalibrationConfig config_;
@@ -96,6 +102,6 @@ class CalibrationService {
 };
 
 /// "intrinsics", "hand_eye", ... for the IDL enum ("unknown" otherwise).
-std::string_view procedure_name(cell_calibration_CalibrationProcedure procedure) noexcept;
+std::string_view procedure_name(const cell_calibration_CalibrationProcedure& procedure) noexcept;
 
 }  // namespace cell::calibration_service

@@ -145,7 +145,7 @@ void CameraService::handle_request(const cell_vision_ImageRequest& request) {
       }
       return;  // another camera's request
     }
-    switch (request.trigger) {
+    switch (bus::raw(request.trigger)) {  // any value may come off the wire
       case cell_vision_TRIGGER_NOW:
         take(wall_time_ns(), key, request.with_truth);
         return;
@@ -168,7 +168,7 @@ void CameraService::handle_request(const cell_vision_ImageRequest& request) {
         return;
     }
     refuse(key, Error{Errc::kInvalidArgument,
-                      fmt::format("unknown trigger {}", static_cast<int>(request.trigger))});
+                      fmt::format("unknown trigger {}", bus::raw(request.trigger))});
   } catch (const std::exception& e) {  // the boundary: never let a request kill the service
     refuse(key, Error{Errc::kInvalidArgument, fmt::format("internal error: {}", e.what())});
   }

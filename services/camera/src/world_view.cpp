@@ -9,7 +9,8 @@
 namespace cell::camera {
 namespace {
 
-Result<render::Shape> shape_from_idl(cell_world_PartShape shape) {
+Result<render::Shape> shape_from_idl(const cell_world_PartShape& field) {
+  const auto shape = bus::raw(field);  // any value may come off the wire
   switch (shape) {
     case cell_world_SHAPE_DIP:
       return render::Shape::kDip;
@@ -26,8 +27,7 @@ Result<render::Shape> shape_from_idl(cell_world_PartShape shape) {
     case cell_world_SHAPE_POLYHEDRON:
       return render::Shape::kPolyhedron;
   }
-  return Error{Errc::kInvalidArgument,
-               fmt::format("unknown shape {}", static_cast<int>(shape))};
+  return Error{Errc::kInvalidArgument, fmt::format("unknown shape {}", shape)};
 }
 
 Eigen::Vector3d vec(const cell_common_Vector3& v) { return {v.x, v.y, v.z}; }

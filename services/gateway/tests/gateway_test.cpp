@@ -197,9 +197,10 @@ TEST(GatewaySupervisor, StopsAMovingRobotWhenEverySupervisorIsLostAndSaysWhy) {
     }
     return last;
   };
+  const std::string robot_id = "ibm7545";
   auto command = [&](cell_robot_RobotCommandKind kind) {
     cell_robot_RobotCommand c{};
-    c.robot_id = bus::borrow(std::string("ibm7545"));
+    c.robot_id = bus::borrow(robot_id);
     c.kind = kind;
     return commands.call(c, 5s);
   };

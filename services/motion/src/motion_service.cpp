@@ -159,7 +159,7 @@ Result<motion::Plan> MotionService::plan(const cell_motion_MotionRequest& reques
   const double scale = request.speed_scale == 0.0 ? 1.0 : request.speed_scale;
   const trajectory::JointVector& q0 = robot.view.q;
   auto target = [&]() { return motion::from_idl(request.target); };
-  switch (request.kind) {
+  switch (bus::raw(request.kind)) {  // any value may come off the wire
     case cell_motion_MOTION_MOVE_JOINTS: {
       const auto joints = bus::span(request.joints_rad_or_mm);
       CELL_TRY(finite_joints(joints, dof, "joints"));
@@ -270,7 +270,7 @@ Result<motion::Plan> MotionService::plan(const cell_motion_MotionRequest& reques
     }
     default:
       return Error{Errc::kInvalidArgument,
-                   fmt::format("unknown motion kind {}", static_cast<int>(request.kind))};
+                   fmt::format("unknown motion kind {}", bus::raw(request.kind))};
   }
 }
 

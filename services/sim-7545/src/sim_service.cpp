@@ -147,7 +147,8 @@ void SimService::publish(const SlaveSnapshot& s) {
   m.fluorescent_on = dpr7545::fluorescent_on(s.lights);
   m.fault_bits = s.error;
   m.fault_text = bus::borrow(fault_text);
-  m.trajectory_id = bus::borrow(std::string());
+  static const std::string kNoTrajectory;  // the board runs no trajectory of the cell's
+  m.trajectory_id = bus::borrow(kNoTrajectory);
   m.cycle_count = s.periods;
   m.cycle_period_s = (s.sample_period_us == 0 ? dpr7545::kDefaultSamplePeriodUs
                                               : s.sample_period_us) *

@@ -136,7 +136,7 @@ Status SimWorldService::reset(const cell_world_WorldRequest& request) {
 }
 
 Result<std::vector<std::string>> SimWorldService::handle(const cell_world_WorldRequest& request) {
-  switch (request.kind) {
+  switch (bus::raw(request.kind)) {  // any value may come off the wire
     case cell_world_WORLD_QUERY: {
       std::vector<std::string> ids;
       for (const auto& p : world_.parts()) {
@@ -209,7 +209,7 @@ Result<std::vector<std::string>> SimWorldService::handle(const cell_world_WorldR
     }
   }
   return Error{Errc::kInvalidArgument,
-               fmt::format("unknown request kind {}", static_cast<int>(request.kind))};
+               fmt::format("unknown request kind {}", bus::raw(request.kind))};
 }
 
 void SimWorldService::answer(const cell_world_WorldRequest& request,

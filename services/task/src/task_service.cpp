@@ -301,9 +301,9 @@ void TaskService::handle_request(const cell_task_JobRequest& request) {
     reasons.push_back(fmt::format("the request names robot '{}' but its spec robot '{}'",
                                   robot_id, spec->robot));
   }
-  if (request.kind != idl_kind(spec->kind)) {
+  if (bus::raw(request.kind) != idl_kind(spec->kind)) {  // any value may come off the wire
     reasons.push_back(fmt::format("the request's kind ({}) differs from its spec's '{}'",
-                                  static_cast<int>(request.kind), task::to_string(spec->kind)));
+                                  bus::raw(request.kind), task::to_string(spec->kind)));
   }
   if (auto s = task::check_job(*spec, facts()); !s) {
     for (auto& line : split_lines(s.error().message)) {
@@ -382,7 +382,7 @@ void TaskService::take_commands() {
           if (final_state(e.state)) {
             refusal = fmt::format("job '{}' is {} already", job_id, state_name(e.state));
           } else {
-            switch (c->kind) {
+            switch (bus::raw(c->kind)) {  // any value may come off the wire
               case cell_task_JOB_PAUSE:
                 e.control.pause = true;
                 if (e.state == cell_task_JOB_RUNNING || e.state == cell_task_JOB_QUEUED) {
@@ -432,10 +432,9 @@ void TaskService::take_commands() {
       reply.status.error_code = bus::borrow(code);
       reply.status.reason = bus::borrow(refusal);
       (void)command_reply_writer_.write(reply);
-      log::info("task", refusal.empty() ? "job command applied" : "job command refused",
-                {{"job", job_id},
-                 {"command", std::to_string(static_cast<int>(c->kind))},
-                 {"reason", refusal}});
+      log::info(
+          "task", refusal.empty() ? "job command applied" : "job command refused",
+          {{"job", job_id}, {"command", std::to_string(bus::raw(c->kind))}, {"reason", refusal}});
     }
   }
 }

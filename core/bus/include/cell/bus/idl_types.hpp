@@ -18,13 +18,19 @@ namespace cell::bus {
 /// Reader and Writer: an unregistered type does not compile.
 template <typename T>
 inline constexpr const dds_topic_descriptor_t* kDescriptor = nullptr;
+/// Whether T is registered. A flag of its own: the address of a descriptor compared with
+/// nullptr is no constant expression where null-pointer checks are kept (-fsanitize=undefined).
+template <typename T>
+inline constexpr bool kRegistered = false;
 
 template <typename T>
-concept IdlType = (kDescriptor<T> != nullptr);
+concept IdlType = kRegistered<T>;
 
-#define CELL_BUS_REGISTER(type) \
-  template <>                   \
-  inline constexpr const dds_topic_descriptor_t* kDescriptor<type> = &type##_desc
+#define CELL_BUS_REGISTER(type)                                                    \
+  template <>                                                                      \
+  inline constexpr const dds_topic_descriptor_t* kDescriptor<type> = &type##_desc; \
+  template <>                                                                      \
+  inline constexpr bool kRegistered<type> = true
 
 CELL_BUS_REGISTER(cell_health_ServiceHeartbeat);
 CELL_BUS_REGISTER(cell_health_CellEvent);

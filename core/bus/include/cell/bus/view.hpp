@@ -1,5 +1,6 @@
 #pragma once
 
+#include <cstring>
 #include <span>
 #include <string>
 #include <string_view>
@@ -22,6 +23,21 @@ inline std::string_view str(const char* s) noexcept { return s != nullptr ? s : 
 
 /// A std::string's characters as the char* an idlc string field wants (read-only use).
 inline char* borrow(const std::string& s) noexcept { return const_cast<char*>(s.c_str()); }
+/// Not from a temporary: it dies at the end of the statement, before the write reads it.
+char* borrow(const std::string&& s) = delete;
+
+/// An enum field of a received sample as its integer value, for the switch or comparison that
+/// refuses a value the contract does not know. A sample off the wire may hold any value, and
+/// idlc's C enums have no fixed underlying type: loading an out-of-range value as the enum is
+/// undefined behaviour (UBSan: "load of value 9, which is not a valid value"), which lets the
+/// compiler drop the very check that would refuse it. The integer is read as bytes instead.
+template <typename E>
+std::underlying_type_t<E> raw(const E& e) noexcept {
+  static_assert(std::is_enum_v<E>, "bus::raw reads an enum field");
+  std::underlying_type_t<E> v;
+  std::memcpy(&v, &e, sizeof v);
+  return v;
+}
 
 /// A received idlc sequence (dds_sequence_X with _length/_buffer) as a span.
 template <typename Seq>
@@ -41,6 +57,9 @@ void borrow(Seq& seq, const std::vector<V>& values) noexcept {
   seq._maximum = seq._length;
   seq._release = false;
 }
+/// Not from a temporary (see borrow of a string).
+template <typename Seq, typename V>
+void borrow(Seq& seq, const std::vector<V>&& values) = delete;
 
 /// A received sequence copied into a vector.
 template <typename Seq>

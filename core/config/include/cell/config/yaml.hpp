@@ -42,8 +42,8 @@ std::string location(const std::string& path, const YAML::Node& node);
 class MapReader {
  public:
   /// `prefix` is the dotted path of this map in the document ("" for the root).
-  MapReader(std::shared_ptr<const Document> doc, YAML::Node map, std::string prefix);
-  MapReader(const Document& doc, YAML::Node map, std::string prefix);
+  MapReader(std::shared_ptr<const Document> doc, const YAML::Node& map, std::string prefix);
+  MapReader(const Document& doc, const YAML::Node& map, std::string prefix);
 
   /// Reads `key` into `out`; records an error when missing or of the wrong type.
   template <typename T>
