@@ -463,30 +463,26 @@ void TaskService::resume_from_journal() {
     }
     auto spec = task::parse_job_spec(j.spec_yaml, fmt::format("<job {}>", j.job_id),
                                      [this](std::string_view id) { return robot(id); });
-    if (!spec) {
+    // A job that cannot be resumed is failed with the reasons; the other jobs go on.
+    const auto set_aside = [&](std::vector<std::string> reasons) {
       entry->state = cell_task_JOB_FAILED;
-      entry->reasons = split_lines("the journaled spec no longer parses: " +
-                                   spec.error().message);
+      entry->reasons = std::move(reasons);
       (void)journal_.set_state(j.job_id, "failed");
       std::lock_guard lock(mutex_);
       publish(*entry);
       jobs_[j.job_id] = std::move(entry);
       remember_finished(j.job_id);
+    };
+    if (!spec) {
+      set_aside(split_lines("the journaled spec no longer parses: " + spec.error().message));
       continue;
     }
     entry->spec = std::move(*spec);
-    // Parts and counters travel in the progress (job_run.cpp). A job whose progress cannot be
-    // read is failed with the reason, not resumed blind; the other jobs go on.
+    // Parts and counters travel in the progress (job_run.cpp): not resumed blind.
     if (auto read = read_progress(entry->progress_json, entry->parts, entry->counters); !read) {
-      entry->state = cell_task_JOB_FAILED;
-      entry->reasons = {"the journaled progress could not be read: " + read.error().message};
       log::warn("task", "journaled job set aside: its progress could not be read",
                 {{"job", j.job_id}, {"reason", read.error().message}});
-      (void)journal_.set_state(j.job_id, "failed");
-      std::lock_guard lock(mutex_);
-      publish(*entry);
-      jobs_[j.job_id] = std::move(entry);
-      remember_finished(j.job_id);
+      set_aside({"the journaled progress could not be read: " + read.error().message});
       continue;
     }
     entry->state = state_from(j.state);
