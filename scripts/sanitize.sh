@@ -14,11 +14,9 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 "$root/scripts/install-deps.sh"
 build="${CELL_ASAN_BUILD_DIR:-$root/build-asan}"
-if [ ! -f "$build/build.ninja" ]; then
-  cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCELL_WERROR=ON \
-    -DCELL_SANITIZE=ON -DCELL_INTEGRATION_TESTS=OFF -DCELL_BUILD_BENCH=OFF
-fi
-cmake --build "$build"
+# scripts/build.sh's configure (Ninja, RelWithDebInfo, warnings as errors), with the sanitizers.
+CELL_BUILD_DIR="$build" "$root/scripts/build.sh" -DCELL_SANITIZE=ON -DCELL_INTEGRATION_TESTS=OFF \
+  -DCELL_BUILD_BENCH=OFF
 
 logs="$(mktemp -d /tmp/cell-sanitizer-XXXXXX)"
 export CELL_SANITIZER_LOGS="$logs"
