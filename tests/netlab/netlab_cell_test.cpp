@@ -8,12 +8,14 @@
 //      the robot, the job resumes after the heal and completes, nothing lost
 //  (c) 50 ms one-way delay and 5 % loss between all hosts: the jobs still complete
 // Each appends a row to $CELL_RELIABILITY_OUT/netlab.jsonl when that is set.
+#include <gmock/gmock.h>
+
 #include <atomic>
 #include <cmath>
+#include <ctime>
 #include <set>
+#include <sstream>
 #include <thread>
-
-#include <gmock/gmock.h>
 
 #include "cell/calibration/camera_calibration.hpp"
 #include "cell/calibration/store.hpp"
@@ -69,7 +71,9 @@ std::string read_text(const std::string& path) {
 }
 
 /// Replaces `key` in `text` once; a test failure names the file when it is missing.
-std::string replaced(std::string text, const std::string& key, const std::string& value,
+std::string replaced(std::string text,
+                     const std::string& key,
+                     const std::string& value,
                      const std::string& where) {
   const auto at = text.find(key);
   if (at == std::string::npos) {
@@ -94,6 +98,41 @@ std::string without_service(const std::string& text, const std::string& name) {
     end = end == std::string::npos ? text.size() : end + 1;
   }
   return text.substr(0, at) + text.substr(end);
+}
+
+/// Seconds from `since` to the first log line (`ts=2026-12-06T11:57:49.285Z ...`, the
+/// services' structured log) that holds `what` and `also` and is stamped at or after `since`;
+/// -1 when none.
+/// The lab's namespaces share the host's clock, so the services' own stamps time an event
+/// exactly, however late a cellctl poll on a loaded host sees it.
+double logged_after(const std::string& logs,
+                    const std::string& what,
+                    const std::string& also,
+                    std::chrono::system_clock::time_point since) {
+  std::istringstream lines(logs);
+  std::string line;
+  while (std::getline(lines, line)) {
+    const auto at = line.find(" ts=");
+    if (line.find(what) == std::string::npos || line.find(also) == std::string::npos ||
+        at == std::string::npos) {
+      continue;
+    }
+    std::tm tm{};
+    int ms = 0;
+    if (std::sscanf(line.c_str() + at + 4, "%4d-%2d-%2dT%2d:%2d:%2d.%3dZ", &tm.tm_year, &tm.tm_mon,
+                    &tm.tm_mday, &tm.tm_hour, &tm.tm_min, &tm.tm_sec, &ms) != 7) {
+      continue;
+    }
+    tm.tm_year -= 1900;
+    tm.tm_mon -= 1;
+    const auto stamp =
+        std::chrono::system_clock::from_time_t(timegm(&tm)) + std::chrono::milliseconds(ms);
+    const double after_s = std::chrono::duration<double>(stamp - since).count();
+    if (after_s >= -0.001) {
+      return after_s;
+    }
+  }
+  return -1.0;
 }
 
 /// Counts of the conveyor job's outcome by ground truth.
@@ -162,8 +201,8 @@ class ThreePcCellTest : public ::testing::Test {
                     "config: " + lab_.dir() + "/gateway-ibm7545.yaml", where);
     text = replaced(text, "config: config/calibration.yaml",
                     "config: " + lab_.dir() + "/calibration.yaml", where);
-    text = replaced(text, "config: config/task.yaml", "config: " + lab_.dir() + "/task.yaml",
-                    where);
+    text =
+        replaced(text, "config: config/task.yaml", "config: " + lab_.dir() + "/task.yaml", where);
     for (const char* name : {"sim-7545", "sim-excalibur", "gateway.excalibur", "monitor"}) {
       text = without_service(text, name);
     }
@@ -171,10 +210,12 @@ class ThreePcCellTest : public ::testing::Test {
   }
 
   /// The simulator's truth as a camera's calibration in the store (not the subject here).
-  void store_truth_calibration(const std::string& camera_id, const std::string& robot_id,
-                               const Eigen::Isometry3d& world_T_base, double plane_z) {
-    auto camera = render::load_camera(cell::testing::source_dir() + "/config/cameras/" +
-                                      camera_id + ".yaml");
+  void store_truth_calibration(const std::string& camera_id,
+                               const std::string& robot_id,
+                               const Eigen::Isometry3d& world_T_base,
+                               double plane_z) {
+    auto camera =
+        render::load_camera(cell::testing::source_dir() + "/config/cameras/" + camera_id + ".yaml");
     ASSERT_TRUE(camera) << camera.error().message;
     render::CameraDescription truth = *camera;
     truth.nominal = camera->truth;
@@ -219,14 +260,18 @@ class ThreePcCellTest : public ::testing::Test {
         << "the operations PC never saw the truth calibration from the vision PC\n"
         << lab_.logs();
     ASSERT_TRUE(cell::testing::eventually(
-        [&] { return cellctl({"robot", "home", "--robot", "ibm7545"}).code == 0; }, 60s))
+        [&] {
+          return cellctl({"robot", "home", "--robot", "ibm7545"}).code == 0;
+        },
+        60s))
         << "the operations PC could not home the 7545 on the control PC\n"
         << lab_.logs();
     ASSERT_TRUE(cell::testing::eventually([&] { return cellctl({"jobs"}).code == 0; }, 30s));
     std::printf("three hosts up and serving in %.1f s\n", seconds_since(t0));
   }
 
-  ShellRun cellctl(const std::vector<std::string>& args, const std::string& host = "operations",
+  ShellRun cellctl(const std::vector<std::string>& args,
+                   const std::string& host = "operations",
                    std::chrono::milliseconds timeout = 60s) {
     std::vector<std::string> argv = {cell::testing::bin_path("cellctl"), "--timeout", "5"};
     argv.insert(argv.end(), args.begin(), args.end());
@@ -270,10 +315,9 @@ class ThreePcCellTest : public ::testing::Test {
 
   /// Submits and waits; returns the job's final status.
   json run_job(const std::string& file, const std::string& id, std::chrono::seconds limit) {
-    const ShellRun r =
-        cellctl({"submit", cell::testing::source_dir() + "/config/jobs/" + file, "--id", id,
-                 "--wait"},
-                "operations", limit);
+    const ShellRun r = cellctl(
+        {"submit", cell::testing::source_dir() + "/config/jobs/" + file, "--id", id, "--wait"},
+        "operations", limit);
     EXPECT_EQ(r.code, 0) << r.output;
     return job(id);
   }
@@ -354,9 +398,9 @@ TEST_F(ThreePcCellTest, TableAndConveyorJobsRunAcrossThreeHostsAndNoImageLeavesT
   // camera takes it but no sample reaches that host, and no link out of vision carries it.
   EXPECT_EQ(lab_.router("reset"), "ok reset");
   const auto grabs_started = Clock::now();
-  const ShellRun here = cellctl({"camera", "grab", "--camera", "ibm7545_eye", "--output",
-                                 lab_.dir() + "/vision-grab.png"},
-                                "vision");
+  const ShellRun here = cellctl(
+      {"camera", "grab", "--camera", "ibm7545_eye", "--output", lab_.dir() + "/vision-grab.png"},
+      "vision");
   EXPECT_EQ(here.code, 0) << "grab on the vision PC: " << here.output;
   const ShellRun there = cellctl({"camera", "grab", "--camera", "ibm7545_eye", "--output",
                                   lab_.dir() + "/operations-grab.png"});
@@ -400,26 +444,27 @@ TEST_F(ThreePcCellTest, TableAndConveyorJobsRunAcrossThreeHostsAndNoImageLeavesT
   json belt;
   const BeltTruth truth = run_conveyor_job("netlab-belt-a", belt);
   const double belt_s = belt.value("elapsed_s", 0.0);
-  std::printf("three hosts: table job %.1f s (%d ICs, worst %.3f mm), conveyor job %.1f s (%d in "
-              "the bin, %d fell off, %d on the belt; counters %s); during the table job vision->"
-              "operations %llu B, vision->control %llu B (the frames taken: >= %llu B)\n",
-              table_s, kTableParts, worst_mm, belt_s, truth.in_bin, truth.fell_off, truth.on_belt,
-              belt.value("counters", json::object()).dump().c_str(),
-              static_cast<unsigned long long>(to_ops), static_cast<unsigned long long>(to_control),
-              static_cast<unsigned long long>(images));
-  record_row("a: three hosts, table + conveyor job",
-             fmt::format("table job {} ICs; conveyor job 20 s at 0.5 m/s (a DIP every 3 s)",
-                         kTableParts),
-             "none (baseline; images kept on the vision PC)",
-             fmt::format("{}: table {:.1f} s (worst {:.2f} mm), conveyor {:.1f} s, {} in bin; "
-                         "vision->operations {} kB, vision->control {} kB during the table job",
-                         HasFailure() ? "failed" : "passed", table_s, worst_mm, belt_s,
-                         truth.in_bin, to_ops / 1000, to_control / 1000),
-             fmt::format("{}; conveyor: {} fell off the belt's end",
-                         table.value("parts_done", 0) == kTableParts ? "nothing lost on the table"
-                                                                     : "table parts missing",
-                         truth.fell_off),
-             seconds_since(t0));
+  std::printf(
+      "three hosts: table job %.1f s (%d ICs, worst %.3f mm), conveyor job %.1f s (%d in "
+      "the bin, %d fell off, %d on the belt; counters %s); during the table job vision->"
+      "operations %llu B, vision->control %llu B (the frames taken: >= %llu B)\n",
+      table_s, kTableParts, worst_mm, belt_s, truth.in_bin, truth.fell_off, truth.on_belt,
+      belt.value("counters", json::object()).dump().c_str(),
+      static_cast<unsigned long long>(to_ops), static_cast<unsigned long long>(to_control),
+      static_cast<unsigned long long>(images));
+  record_row(
+      "a: three hosts, table + conveyor job",
+      fmt::format("table job {} ICs; conveyor job 20 s at 0.5 m/s (a DIP every 3 s)", kTableParts),
+      "none (baseline; images kept on the vision PC)",
+      fmt::format("{}: table {:.1f} s (worst {:.2f} mm), conveyor {:.1f} s, {} in bin; "
+                  "vision->operations {} kB, vision->control {} kB during the table job",
+                  HasFailure() ? "failed" : "passed", table_s, worst_mm, belt_s, truth.in_bin,
+                  to_ops / 1000, to_control / 1000),
+      fmt::format("{}; conveyor: {} fell off the belt's end",
+                  table.value("parts_done", 0) == kTableParts ? "nothing lost on the table"
+                                                              : "table parts missing",
+                  truth.fell_off),
+      seconds_since(t0));
 }
 
 TEST_F(ThreePcCellTest, PartitionedControlPcPausesTheJobStopsTheRobotAndTheJobResumes) {
@@ -441,40 +486,53 @@ TEST_F(ThreePcCellTest, PartitionedControlPcPausesTheJobStopsTheRobotAndTheJobRe
       120s))
       << job("netlab-table-b").dump(2);
   ASSERT_TRUE(cell::testing::eventually(
-      [&] {
-        return robot_state("ibm7545", "control").value("moving", false);
-      },
-      30s));
+      [&] { return robot_state("ibm7545", "control").value("moving", false); }, 30s));
   lab_.partition("control");
   const auto cut_at = Clock::now();
-  std::atomic<double> paused_after_s{-1.0};
-  std::atomic<double> stopped_after_s{-1.0};
+  const auto cut_wall = std::chrono::system_clock::now();
+  // What an operator sees: the operations PC shows the job paused, the control PC its robot
+  // stopped. The partition lasts 5 s, longer if a poll on a loaded host has not seen both yet.
+  std::atomic<bool> paused_seen{false};
   std::string stopped_fault;
-  // The operations PC watches the job, the control PC its robot, both for the 5 s.
   std::thread watch_job([&] {
-    while (seconds_since(cut_at) < 5.0 && paused_after_s < 0) {
-      if (job("netlab-table-b").value("state", "") == "paused") {
-        paused_after_s = seconds_since(cut_at);
-      }
+    while (!paused_seen && seconds_since(cut_at) < 30.0) {
+      paused_seen = job("netlab-table-b").value("state", "") == "paused";
     }
   });
-  while (seconds_since(cut_at) < 5.0) {
-    const json state = robot_state("ibm7545", "control");
-    if (stopped_after_s < 0 && state.value("mode", "") == "stopped") {
-      stopped_after_s = seconds_since(cut_at);
-      stopped_fault = state.value("fault", "");
+  bool stopped_seen = false;
+  while ((!stopped_seen || !paused_seen || seconds_since(cut_at) < 5.0) &&
+         seconds_since(cut_at) < 30.0) {
+    if (!stopped_seen) {
+      const json state = robot_state("ibm7545", "control");
+      if (state.value("mode", "") == "stopped") {
+        stopped_seen = true;
+        stopped_fault = state.value("fault", "");
+      }
+    } else {
+      std::this_thread::sleep_for(100ms);
     }
   }
   watch_job.join();
+  const double cut_s = seconds_since(cut_at);
   lab_.heal("control");
   const auto healed_at = Clock::now();
-  std::printf("partition of the control PC: job paused after %.2f s, robot stopped after %.2f s "
-              "(%s); -1: not seen within 5 s\n",
-              paused_after_s.load(), stopped_after_s.load(), stopped_fault.c_str());
-  EXPECT_GE(paused_after_s, 0.0) << "the job never showed 'paused' during the 5 s partition";
-  EXPECT_LE(paused_after_s, 4.5) << "the 3 s lease, plus a cellctl round on a loaded machine";
-  EXPECT_GE(stopped_after_s, 0.0) << "the gateway never reported mode 'stopped' in 5 s";
-  EXPECT_LE(stopped_after_s, 4.5);
+  // When each happened, by the services' own log stamps.
+  const std::string logs = lab_.logs();
+  const double paused_after_s =
+      logged_after(logs, "paused: a service the job needs", "job=netlab-table-b", cut_wall);
+  const double stopped_after_s =
+      logged_after(logs, "every supervisor lost", "robot=ibm7545", cut_wall);
+  std::printf(
+      "partition of the control PC for %.1f s: job paused after %.2f s, robot stopped "
+      "after %.2f s (%s) by the services' logs; -1: not logged\n",
+      cut_s, paused_after_s, stopped_after_s, stopped_fault.c_str());
+  EXPECT_TRUE(paused_seen) << "cellctl never showed the job 'paused' during the partition";
+  EXPECT_TRUE(stopped_seen) << "cellctl never showed the robot 'stopped' during the partition";
+  EXPECT_EQ(stopped_fault, "stopped: supervisor 'task' lost");
+  EXPECT_GE(paused_after_s, 0.0) << "the task never logged the pause";
+  EXPECT_LE(paused_after_s, 4.5) << "the 3 s lease, and the task's check of its peers";
+  EXPECT_GE(stopped_after_s, 0.0) << "the gateway never logged the stop";
+  EXPECT_LE(stopped_after_s, 3.5) << "the 3 s lease, and the gateway's 10 Hz check";
 
   json end;
   ASSERT_TRUE(cell::testing::eventually(
@@ -496,19 +554,19 @@ TEST_F(ThreePcCellTest, PartitionedControlPcPausesTheJobStopsTheRobotAndTheJobRe
     same += j.value("job_id", "") == "netlab-table-b" ? 1 : 0;
   }
   EXPECT_EQ(same, 1) << jobs.dump(2);
-  record_row("b: control PC partitioned 5 s during a table job",
-             fmt::format("table job {} ICs (gateway, motion, world on the control PC)",
-                         kTableParts),
-             "nftables drop of everything in/out of control's cell0 for 5 s, then healed",
-             fmt::format("{}: paused after {:.2f} s, robot stopped after {:.2f} s (-1: never), "
-                         "job ended {:.1f} s after the heal, worst {:.2f} mm",
-                         HasFailure() ? "failed" : "passed", paused_after_s.load(),
-                         stopped_after_s.load(), resumed_after_s, worst_mm),
-             end.value("parts_done", 0) == kTableParts && same == 1
-                 ? "nothing lost (one job, every part in its slot)"
-                 : fmt::format("{} of {} parts done, {} jobs of that id",
-                               end.value("parts_done", 0), kTableParts, same),
-             seconds_since(t0));
+  record_row(
+      "b: control PC partitioned 5 s during a table job",
+      fmt::format("table job {} ICs (gateway, motion, world on the control PC)", kTableParts),
+      "nftables drop of everything in/out of control's cell0 for 5 s, then healed",
+      fmt::format("{}: paused after {:.2f} s, robot stopped after {:.2f} s (-1: never), "
+                  "job ended {:.1f} s after the heal, worst {:.2f} mm",
+                  HasFailure() ? "failed" : "passed", paused_after_s, stopped_after_s,
+                  resumed_after_s, worst_mm),
+      end.value("parts_done", 0) == kTableParts && same == 1
+          ? "nothing lost (one job, every part in its slot)"
+          : fmt::format("{} of {} parts done, {} jobs of that id", end.value("parts_done", 0),
+                        kTableParts, same),
+      seconds_since(t0));
 }
 
 TEST_F(ThreePcCellTest, FiftyMillisecondsDelayAndFivePercentLossStillCompleteTheJobs) {
@@ -530,22 +588,23 @@ TEST_F(ThreePcCellTest, FiftyMillisecondsDelayAndFivePercentLossStillCompleteThe
   lab_.set_delay_ms(0);
   const double table_s = table.value("elapsed_s", 0.0);
   const double belt_s = belt.value("elapsed_s", 0.0);
-  std::printf("50 ms + 5%% loss: table job %.1f s (%d ICs, worst %.3f mm), conveyor job %.1f s "
-              "(%d in the bin, %d fell off; counters %s); router: %s\n",
-              table_s, kTableParts, worst_mm, belt_s, truth.in_bin, truth.fell_off,
-              belt.value("counters", json::object()).dump().c_str(), stats.dump().c_str());
-  record_row("c: 50 ms one-way delay + 5% loss between all hosts",
-             fmt::format("table job {} ICs; conveyor job 20 s at 0.5 m/s", kTableParts),
-             "router delay 50 ms each way, nftables 5% random drop at every host's ingress",
-             fmt::format("{}: table {:.1f} s (worst {:.2f} mm), conveyor {:.1f} s, {} in bin "
-                         "(compare row a)",
-                         HasFailure() ? "failed" : "passed", table_s, worst_mm, belt_s,
-                         truth.in_bin),
-             fmt::format("{}; conveyor: {} fell off the belt's end",
-                         table.value("parts_done", 0) == kTableParts ? "nothing lost on the table"
-                                                                     : "table parts missing",
-                         truth.fell_off),
-             seconds_since(t0));
+  std::printf(
+      "50 ms + 5%% loss: table job %.1f s (%d ICs, worst %.3f mm), conveyor job %.1f s "
+      "(%d in the bin, %d fell off; counters %s); router: %s\n",
+      table_s, kTableParts, worst_mm, belt_s, truth.in_bin, truth.fell_off,
+      belt.value("counters", json::object()).dump().c_str(), stats.dump().c_str());
+  record_row(
+      "c: 50 ms one-way delay + 5% loss between all hosts",
+      fmt::format("table job {} ICs; conveyor job 20 s at 0.5 m/s", kTableParts),
+      "router delay 50 ms each way, nftables 5% random drop at every host's ingress",
+      fmt::format("{}: table {:.1f} s (worst {:.2f} mm), conveyor {:.1f} s, {} in bin "
+                  "(compare row a)",
+                  HasFailure() ? "failed" : "passed", table_s, worst_mm, belt_s, truth.in_bin),
+      fmt::format("{}; conveyor: {} fell off the belt's end",
+                  table.value("parts_done", 0) == kTableParts ? "nothing lost on the table"
+                                                              : "table parts missing",
+                  truth.fell_off),
+      seconds_since(t0));
 }
 
 }  // namespace

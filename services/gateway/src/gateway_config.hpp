@@ -19,8 +19,8 @@ namespace cell::gateway {
 ///   realtime_priority: 0      # SCHED_FIFO priority of the servo thread; 0: normal scheduling
 ///   start_tolerance_deg: 0.5  # a trajectory must start this close to the current setpoint
 ///   start_tolerance_mm: 0.5
-///   supervisors: [task]       # service ids; when every one has lost its heartbeat while the
-///                             # robot moves or tracks, the gateway stops it (empty: none)
+///   supervisors: [task]       # service ids; when every one has lost its heartbeat, the
+///                             # gateway stops the robot, moving or not (empty: none)
 ///   driver:
 ///     kind: ideal             # one of drivers.cpp's table; the other keys are the driver's
 ///     ...                     # own (see each driver's header and the gateway README)
@@ -33,8 +33,9 @@ struct GatewayConfig {
   double start_tolerance_rad = 0.5 * 3.141592653589793 / 180.0;
   double start_tolerance_mm = 0.5;
   /// Service ids whose heartbeats the gateway watches (service::ServiceDirectory): when all
-  /// of them are lost (3 s liveliness lease) while the robot moves or tracks, it is stopped
-  /// as by a STOP command, stop_code "supervisor_lost". Empty (the default): none.
+  /// of them are lost (3 s liveliness lease), the robot is stopped as by a STOP command, moving
+  /// or not (unless already in FAULT or STOPPED), stop_code "supervisor_lost". Empty (the
+  /// default): none.
   std::vector<std::string> supervisors;
   std::string driver_kind;
   DriverFactory make_driver;  ///< from the driver's parser; builds it once the robot is known

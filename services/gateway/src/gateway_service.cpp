@@ -1,14 +1,13 @@
 #include "gateway_service.hpp"
 
+#include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <pthread.h>
 #include <sched.h>
 #include <time.h>
 
 #include <cmath>
 #include <stdexcept>
-
-#include <fmt/format.h>
-#include <fmt/ranges.h>
 
 #include "cell/bus/view.hpp"
 #include "cell/common/log.hpp"
@@ -62,8 +61,8 @@ GatewayService::GatewayService(service::Context& ctx, const GatewayConfig& confi
   servo_ = std::make_unique<Servo>(model_, std::move(*driver), config_.start_tolerance_rad,
                                    config_.start_tolerance_mm);
   if (auto s = servo_->start(Clock::now()); !s) {
-    throw std::runtime_error(fmt::format("driver '{}' failed to start: {}", config_.driver_kind,
-                                         s.error().message));
+    throw std::runtime_error(
+        fmt::format("driver '{}' failed to start: {}", config_.driver_kind, s.error().message));
   }
   if (!config_.supervisors.empty()) {
     directory_.emplace(ctx.participant(), ctx.common().service_id + ".supervisors");
@@ -297,16 +296,30 @@ void GatewayService::watch_supervisors(const ServoSnapshot& snapshot) {
   }
   // One stop per loss: once the robot was stopped (and perhaps reset and moved by an
   // operator), it is not stopped again until a supervisor came back and was lost again.
-  if (supervisors_lost_ || !(snapshot.moving || snapshot.tracking)) {
+  if (supervisors_lost_) {
     return;
   }
   supervisors_lost_ = true;
   const std::string names = fmt::format("'{}'", fmt::join(lost, "', '"));
+  // A robot already halted keeps its reason (a fault, an operator's STOP: that one waits for
+  // the operator, not for the task). Any other is stopped, moving or not: a move that ended
+  // within the lease leaves the robot idle but still open to whatever its motion service
+  // sends next, and the cell that decides what comes next is gone. STOPPED says so, and
+  // nothing moves until a RESET (the task's, once it sees the robot again, or an operator's).
+  if (snapshot.mode == cell_robot_MODE_FAULT || snapshot.mode == cell_robot_MODE_STOPPED) {
+    log::warn("supervisor", "every supervisor lost; the robot was already halted",
+              {{"robot", model_.id()}, {"supervisors", names}});
+    return;
+  }
   const std::string text = fmt::format("stopped: supervisor {} lost", names);
   servo_->post_stop("supervisor_lost", text);
-  log::warn("supervisor", "every supervisor lost while the robot moves: stopping it",
-            {{"robot", model_.id()}, {"supervisors", names},
-             {"trajectory", snapshot.trajectory_id}});
+  log::warn(
+      "supervisor",
+      snapshot.moving || snapshot.tracking ? "every supervisor lost while the robot moves: "
+                                             "stopping it"
+                                           : "every supervisor lost: holding the robot "
+                                             "stopped",
+      {{"robot", model_.id()}, {"supervisors", names}, {"trajectory", snapshot.trajectory_id}});
   ctx_.events().publish(cell_health_SEVERITY_WARNING, "gateway.supervisor_lost",
                         fmt::format("robot '{}' {}", model_.id(), text), model_.id());
 }
@@ -319,7 +332,8 @@ void GatewayService::run(service::Context& ctx) {
   waitset.attach(command_reader_.condition(), kCommand);
   ctx.health().set(cell_health_HEALTH_SERVING);
   log::info("gateway", "serving robot",
-            {{"robot", model_.id()}, {"driver", servo_->driver_info().name},
+            {{"robot", model_.id()},
+             {"driver", servo_->driver_info().name},
              {"cycle_hz", fmt::format("{}", config_.cycle_hz)}});
   for (;;) {
     const bus::Fired fired = waitset.wait(std::chrono::milliseconds(100));

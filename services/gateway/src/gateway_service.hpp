@@ -43,7 +43,7 @@ class GatewayService {
   void handle_command(const cell_robot_RobotCommand& message);
   void handle_alter(const cell_motion_AlterCorrection& message);
   void reply(const cell_common_RequestId& id, const Status& status);
-  /// Watches the supervisors' heartbeats; stops a moving robot when every one is lost.
+  /// Watches the supervisors' heartbeats; stops the robot, moving or not, when every one is lost.
   void watch_supervisors(const ServoSnapshot& snapshot);
 
   service::Context& ctx_;

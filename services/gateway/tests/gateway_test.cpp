@@ -1,11 +1,9 @@
-#include "gateway_service.hpp"
-
-#include <csignal>
-#include <thread>
-
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+#include <csignal>
+#include <thread>
 
 #include "cell/bus/request_reply.hpp"
 #include "cell/bus/view.hpp"
@@ -15,6 +13,7 @@
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
 #include "cell/testing/service_harness.hpp"
+#include "gateway_service.hpp"
 
 namespace cell::gateway {
 namespace {
@@ -41,12 +40,15 @@ TEST(GatewayConfig, DriverKeysAreCheckedByTheDriverWithLocations) {
   ASSERT_TRUE(doc);
   auto config = load_config(*doc);
   ASSERT_FALSE(config);
-  EXPECT_THAT(config.error().message, ::testing::HasSubstr("key 'driver.gripper_time_s': must be in [0, 10], got -1"));
+  EXPECT_THAT(config.error().message,
+              ::testing::HasSubstr("key 'driver.gripper_time_s': must be in [0, 10], got -1"));
   EXPECT_THAT(config.error().message, ::testing::HasSubstr("unknown key 'driver.colour'"));
   doc = config::load_string("robot_config: x.yaml\ndriver: {kind: puma}\n", "g.yaml");
   config = load_config(*doc);
   ASSERT_FALSE(config);
-  EXPECT_THAT(config.error().message, ::testing::HasSubstr("g.yaml:2:16: key 'driver.kind': unknown driver 'puma' (known: ideal"));
+  EXPECT_THAT(
+      config.error().message,
+      ::testing::HasSubstr("g.yaml:2:16: key 'driver.kind': unknown driver 'puma' (known: ideal"));
 }
 
 class GatewayTest : public ::testing::Test {
@@ -103,7 +105,7 @@ TEST_F(GatewayTest, PublishesStateAtTheConfiguredRate) {
     states_.wait_for_data(50ms);
     n += states_.take_copies(64)->size();
   }
-  EXPECT_GT(n, 70U);   // 100 Hz nominal; generous for a loaded 2-core machine
+  EXPECT_GT(n, 70U);  // 100 Hz nominal; generous for a loaded 2-core machine
   EXPECT_LT(n, 130U);
   auto s = latest();
   EXPECT_EQ(bus::str((*s)->robot_id), "ibm7545");
@@ -170,8 +172,10 @@ TEST_F(GatewayTest, AnswersEveryCommandAndIgnoresOtherRobots) {
 
 // The supervisor watch: a heartbeat writer of another process (Cyclone leases only those),
 // here cell-echo under the id "task", killed while the robot moves: the gateway stops the
-// robot as a STOP command does and says why in a way the task service can recognise.
-TEST(GatewaySupervisor, StopsAMovingRobotWhenEverySupervisorIsLostAndSaysWhy) {
+// robot as a STOP command does and says why in a way the task service can recognise. Then a
+// new supervisor, killed while the robot rests: stopped too (a move that ends within the lease
+// must not leave the robot open to the next command of a cell that is gone).
+TEST(GatewaySupervisor, StopsTheRobotMovingOrAtRestWhenEverySupervisorIsLostAndSaysWhy) {
   const std::uint32_t domain = cell::testing::test_domain_id();
   const std::string partition = cell::testing::unique_partition();
   GatewayConfig config = ideal_config();
@@ -296,6 +300,42 @@ TEST(GatewaySupervisor, StopsAMovingRobotWhenEverySupervisorIsLostAndSaysWhy) {
                bus::str((*s)->fault_text).empty();
       },
       5s));
+
+  // At rest: a supervisor comes back, and is lost again while nothing moves.
+  auto second = process::Child::spawn(options);
+  ASSERT_THAT(second, ::cell::testing::IsOk());
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        auto entries = directory.snapshot();
+        if (!entries) {
+          return false;
+        }
+        for (const service::ServiceEntry& e : *entries) {
+          if (e.service_id == "task" && !e.lost && e.state == cell_health_HEALTH_SERVING) {
+            return true;
+          }
+        }
+        return false;
+      },
+      10s));
+  std::this_thread::sleep_for(300ms);  // the gateway reads the heartbeats at 10 Hz
+  auto resting = latest();
+  ASSERT_TRUE(resting.has_value());
+  ASSERT_EQ((*resting)->mode, cell_robot_MODE_IDLE) << "back: no new stop";
+  ASSERT_FALSE((*resting)->moving);
+  const double z_resting = bus::span((*resting)->position_rad_or_mm)[2];
+  ASSERT_EQ(::kill(second->pid(), SIGKILL), 0);
+  (void)second->wait_for(5s);
+  ASSERT_TRUE(cell::testing::eventually(
+      [&] {
+        stopped = latest();
+        return stopped && (*stopped)->mode == cell_robot_MODE_STOPPED;
+      },
+      10s))
+      << "a robot at rest is stopped too once its only supervisor is lost";
+  EXPECT_EQ(bus::str((*stopped)->stop_code), "supervisor_lost");
+  EXPECT_EQ(bus::str((*stopped)->fault_text), "stopped: supervisor 'task' lost");
+  EXPECT_NEAR(bus::span((*stopped)->position_rad_or_mm)[2], z_resting, 0.5);
 }
 
 TEST(GatewayConfig, SupervisorsAreServiceIdsAndNoneByDefault) {
