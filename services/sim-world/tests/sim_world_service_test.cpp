@@ -1,18 +1,21 @@
 // cell-sim-world in-process on a private bus: config errors, every request kind, picks driven
-// by RobotStates, and the photocell on the bus.
+// by RobotStates, and the photocell on the bus; as a process, a stall of its loop.
 #include "sim_world_service.hpp"
 
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <signal.h>
 
 #include <chrono>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "cell/bus/request_reply.hpp"
 #include "cell/bus/view.hpp"
+#include "cell/process/child.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
 #include "cell/testing/service_harness.hpp"
@@ -399,6 +402,64 @@ TEST_F(SimWorldBeltTest, BeltStatesAndPhotocellEdgesAreOnTheBus) {
         return saw_belt;
       },
       5s));
+}
+
+// A loaded host may stall the simulator's loop (here SIGSTOP for 0.6 s). Its belt does not stop
+// for that: every consumer extrapolates the belt and its parts by the stamps (the camera's
+// exposure, ALTER), so the world's travel must stay on the wall clock. Before the coarse
+// catch-up, the loop dropped all but 100 ms of such a backlog: 50 mm of travel lost here.
+TEST(SimWorldProcess, AStalledLoopKeepsTheBeltOnTheWallClock) {
+  const std::uint32_t domain = cell::testing::test_domain_id();
+  const std::string partition = cell::testing::unique_partition();
+  const std::string config = ::testing::TempDir() + "/sim-world-stall.yaml";
+  std::ofstream(config) << "service: {id: sim-world}\nscene: " << scene_path("belt_conveyor.yaml")
+                        << "\n";
+  process::SpawnOptions options;
+  options.executable = cell::testing::bin_path("cell-sim-world");
+  options.args = {"--config", config};
+  options.env = cell::testing::bus_env(domain, partition);
+  auto world = process::Child::spawn(options);
+  ASSERT_THAT(world, IsOk());
+  bus::Participant client(domain, partition);
+  bus::Topic<cell_world_BeltState> topic(client, bus::topics::kBeltState);
+  bus::Reader<cell_world_BeltState> reader(client, topic, bus::topics::kBeltState);
+  struct Sample {
+    std::int64_t stamp_ns = 0;
+    double travel_mm = 0;
+    double speed_mm_s = 0;
+  };
+  auto latest = [&] {
+    std::optional<Sample> last;
+    (void)reader.take_each([&](const cell_world_BeltState& b, const dds_sample_info_t&) {
+      if (bus::str(b.belt_id) == "belt1") {
+        last = Sample{b.header.stamp_ns, b.travel_mm, b.speed_mm_per_s};
+      }
+    });
+    return last;
+  };
+  std::optional<Sample> before;
+  ASSERT_TRUE(eventually([&] { return (before = latest()).has_value(); }, 20s)) << world->output();
+  std::this_thread::sleep_for(300ms);
+  before = latest();
+  ASSERT_TRUE(before.has_value());
+  ASSERT_EQ(::kill(world->pid(), SIGSTOP), 0);
+  std::this_thread::sleep_for(600ms);
+  ASSERT_EQ(::kill(world->pid(), SIGCONT), 0);
+  std::this_thread::sleep_for(300ms);
+  (void)latest();  // what it published while catching up
+  std::this_thread::sleep_for(200ms);
+  std::optional<Sample> after = latest();
+  ASSERT_TRUE(after.has_value());
+  const double dt_s = static_cast<double>(after->stamp_ns - before->stamp_ns) * 1e-9;
+  const double travel_mm = after->travel_mm - before->travel_mm;
+  std::printf("over %.3f s with a 0.6 s stall: belt travel %.2f mm, the wall clock's %.2f mm\n",
+              dt_s, travel_mm, before->speed_mm_s * dt_s);
+  EXPECT_GT(dt_s, 0.9);
+  EXPECT_NEAR(travel_mm, before->speed_mm_s * dt_s, 1.0);
+  ASSERT_EQ(::kill(world->pid(), SIGTERM), 0);
+  const std::optional<process::ExitInfo> exit = world->wait_for(10s);
+  ASSERT_TRUE(exit.has_value()) << "no clean stop within 10 s of SIGTERM";
+  EXPECT_TRUE(exit->exited && exit->code == 0) << world->output();
 }
 
 }  // namespace
