@@ -9,14 +9,31 @@
 # any report was written, and prints the reports.
 #
 #   scripts/sanitize.sh [ctest args, e.g. -R task_service]
+#   scripts/sanitize.sh --build-only      # the build alone (.ci/run: beside the suite)
+#   scripts/sanitize.sh --no-build [...]  # the tests alone, on the build as it is
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
-"$root/scripts/install-deps.sh"
 build="${CELL_ASAN_BUILD_DIR:-$root/build-asan}"
-# scripts/build.sh's configure (Ninja, RelWithDebInfo, warnings as errors), with the sanitizers.
-CELL_BUILD_DIR="$build" "$root/scripts/build.sh" -DCELL_SANITIZE=ON -DCELL_INTEGRATION_TESTS=OFF \
-  -DCELL_BUILD_BENCH=OFF
+mode=all
+case "${1:-}" in
+  --build-only) mode=build; shift ;;
+  --no-build) mode=test; shift ;;
+esac
+if [ "$mode" != test ]; then
+  "$root/scripts/install-deps.sh"
+  # scripts/build.sh's configure (Ninja, RelWithDebInfo, warnings as errors), with the
+  # sanitizers.
+  CELL_BUILD_DIR="$build" "$root/scripts/build.sh" -DCELL_SANITIZE=ON \
+    -DCELL_INTEGRATION_TESTS=OFF -DCELL_BUILD_BENCH=OFF
+fi
+if [ "$mode" = build ]; then
+  exit 0
+fi
+if [ ! -f "$build/CTestTestfile.cmake" ]; then
+  echo "sanitize.sh: no sanitizer build in $build (run scripts/sanitize.sh without --no-build)" >&2
+  exit 2
+fi
 
 logs="$(mktemp -d /tmp/cell-sanitizer-XXXXXX)"
 export CELL_SANITIZER_LOGS="$logs"
