@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <functional>
 #include <numbers>
 #include <random>
@@ -382,7 +383,7 @@ json timings(int reps) {
 }  // namespace
 }  // namespace cell::bench
 
-int main(int argc, char** argv) {
+static int main_body(int argc, char** argv) {
   CLI::App app("calibration_bench: core/calibration against OpenCV on renders with known truth");
   bool quick = false;
   bool as_json = false;
@@ -441,4 +442,16 @@ int main(int argc, char** argv) {
     std::printf("%s\n", out.dump(2).c_str());
   }
   return 0;
+}
+
+// Nothing escapes main: an exception is printed and fails the run.
+int main(int argc, char** argv) {
+  try {
+    return main_body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "calibration_bench: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "calibration_bench: an exception not derived from std::exception\n");
+  }
+  return 1;
 }

@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <numeric>
 #include <string>
 #include <thread>
@@ -209,7 +210,7 @@ Row measure_raw_pty(int count) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int main_body(int argc, char** argv) {
   CLI::App app{"excalibur_bench: Excalibur serial-link round trip (command sent -> reply parsed)"};
   bool quick = false;
   int count = 200;
@@ -285,4 +286,16 @@ int main(int argc, char** argv) {
         steps < 10.0 ? ": below 10 Hz, so the link, not the host, limits on-line following" : "");
   }
   return 0;
+}
+
+// Nothing escapes main: an exception is printed and fails the run.
+int main(int argc, char** argv) {
+  try {
+    return main_body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "excalibur_bench: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "excalibur_bench: an exception not derived from std::exception\n");
+  }
+  return 1;
 }

@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <functional>
 #include <random>
 #include <string>
@@ -167,7 +168,7 @@ LmaResult run_lma(const Model& model,
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int main_body(int argc, char** argv) {
   std::size_t samples = 10000;
   std::size_t lma_samples = 2000;
   std::string config_dir = std::string(CELL_SOURCE_DIR) + "/config/robots";
@@ -237,7 +238,10 @@ int main(int argc, char** argv) {
   const KDL::Chain arm_chain = peer::excalibur_chain(arm, kKdlScale);
   KDL::ChainFkSolverPos_recursive arm_kdl_fk(arm_chain);
   std::vector<KDL::JntArray> arm_kdl_q;
-  for (const auto& q : arm_q) arm_kdl_q.push_back(peer::excalibur_kdl_joints(q));
+  arm_kdl_q.reserve(arm_q.size());
+  for (const auto& q : arm_q) {
+    arm_kdl_q.push_back(peer::excalibur_kdl_joints(q));
+  }
   KDL::Frame frame;
   const double arm_kdl_fk_ns = time_per_call(samples, [&](std::size_t i) {
     arm_kdl_fk.JntToCart(arm_kdl_q[i], frame);
@@ -290,7 +294,10 @@ int main(int argc, char** argv) {
   const KDL::Chain scara_chain = peer::scara_chain(scara, kKdlScale);
   KDL::ChainFkSolverPos_recursive scara_kdl_fk(scara_chain);
   std::vector<KDL::JntArray> scara_kdl_q;
-  for (const auto& q : scara_q) scara_kdl_q.push_back(peer::scara_kdl_joints(scara, q));
+  scara_kdl_q.reserve(scara_q.size());
+  for (const auto& q : scara_q) {
+    scara_kdl_q.push_back(peer::scara_kdl_joints(scara, q));
+  }
   const double scara_kdl_fk_ns = time_per_call(samples, [&](std::size_t i) {
     scara_kdl_fk.JntToCart(scara_kdl_q[i], frame);
     benchmark::DoNotOptimize(frame.p.data);
@@ -323,4 +330,16 @@ int main(int argc, char** argv) {
   std::printf("\ntarget (all 8 Excalibur branches < 2000 ns and >= 100x faster than KDL LMA): %s\n",
               target_met ? "met" : "NOT met");
   return 0;
+}
+
+// Nothing escapes main: an exception is printed and fails the run.
+int main(int argc, char** argv) {
+  try {
+    return main_body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "kinematics_bench: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "kinematics_bench: an exception not derived from std::exception\n");
+  }
+  return 1;
 }

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <numbers>
 #include <string>
@@ -348,6 +349,7 @@ std::pair<double, double> corner_accuracy() {
   cv::Mat peer(camera.height_px(), camera.width_px(), CV_8U,
                cv::Scalar(std::round(255.0 * 0.9)));
   std::vector<cv::Point> poly;
+  poly.reserve(truth.size());
   for (const auto& c : truth) {
     poly.emplace_back(static_cast<int>(std::lround(c.x() * 16.0)),
                       static_cast<int>(std::lround(c.y() * 16.0)));
@@ -360,7 +362,7 @@ std::pair<double, double> corner_accuracy() {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int main_body(int argc, char** argv) {
   CLI::App app("render_bench: core/render frame times against OpenCV drawing the same scene",
                "render_bench");
   bool quick = false;
@@ -441,8 +443,8 @@ int main(int argc, char** argv) {
       if (!save_dir.empty()) {
         std::filesystem::create_directories(save_dir);
         const std::string stem = i == 0 ? "eye" : "belt";
-        cv::imwrite(save_dir + "/" + stem + ".png", ours);
-        cv::imwrite(save_dir + "/" + stem + "_opencv.png", theirs);
+        cv::imwrite(fmt::format("{}/{}.png", save_dir, stem), ours);
+        cv::imwrite(fmt::format("{}/{}_opencv.png", save_dir, stem), theirs);
       }
     }
     const auto [ours_px, peer_px] = corner_accuracy();
@@ -500,4 +502,16 @@ int main(int argc, char** argv) {
     return 1;
   }
   return 0;
+}
+
+// Nothing escapes main: an exception is printed and fails the run.
+int main(int argc, char** argv) {
+  try {
+    return main_body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "render_bench: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "render_bench: an exception not derived from std::exception\n");
+  }
+  return 1;
 }

@@ -4,13 +4,14 @@
 // says what is measured and how to read it.
 #include <sched.h>
 #include <sys/mman.h>
-#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -379,7 +380,7 @@ void print(const std::vector<Run>& runs, const Options& o) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int main_body(int argc, char** argv) {
   Options o;
   CLI::App app{"servo_bench: the 7545 DPR control loop against cell-sim-7545 (bench/README.md)"};
   app.add_option("--duration", o.duration_s, "seconds of control per mode (default 60)");
@@ -427,4 +428,16 @@ int main(int argc, char** argv) {
     }
   }
   return 0;
+}
+
+// Nothing escapes main: an exception is printed and fails the run.
+int main(int argc, char** argv) {
+  try {
+    return main_body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "servo_bench: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "servo_bench: an exception not derived from std::exception\n");
+  }
+  return 1;
 }

@@ -69,6 +69,7 @@ Stats gripped_field(const std::string& journal, const std::string& job, const ch
 
 class TaskBench : public TaskCellTest {
  protected:
+  // NOLINTNEXTLINE(bugprone-exception-escape): plain struct; tidy 14 blames json's members
   struct BeltRun {
     double speed = 0, period = 0;
     int in_bin = 0, fell_off = 0, picked = 0;

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <nlohmann/json.hpp>
 #include <numbers>
 #include <opencv2/imgproc.hpp>
@@ -74,7 +75,7 @@ struct Row {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int main_body(int argc, char** argv) {
   CLI::App app("vision_bench: core/vision's pipelines against an OpenCV baseline");
   bool quick = false;
   bool json_out = false;
@@ -117,7 +118,7 @@ int main(int argc, char** argv) {
         req.count = count;
         req.pins = true;
         req.lights = s % 2 == 1 ? testing::Lights::kTubes : testing::Lights::kTubesAndLamp;
-        req.seed = static_cast<std::uint64_t>(100 + s);
+        req.seed = 100 + static_cast<std::uint64_t>(s);
         if (count > 15) {
           req.classes = {"dip8", "dip14", "ic_6x19", "dip16"};
           req.min_separation_mm = 3.0;
@@ -230,4 +231,16 @@ int main(int argc, char** argv) {
     return 1;
   }
   return 0;
+}
+
+// Nothing escapes main: an exception is printed and fails the run.
+int main(int argc, char** argv) {
+  try {
+    return main_body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "vision_bench: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "vision_bench: an exception not derived from std::exception\n");
+  }
+  return 1;
 }

@@ -154,7 +154,7 @@ void section_capture(const Options& o) {
   for (const std::uint32_t n : {15U, 100U, 1000U}) {
     World w = make_world(n);
     std::vector<WorldEvent> events;
-    events.reserve(static_cast<std::size_t>(2 * cycles + 8));
+    events.reserve(2 * static_cast<std::size_t>(cycles) + 8);
     Eigen::Isometry3d tool = Eigen::Isometry3d::Identity();
     tool.translation() = Eigen::Vector3d(0, 0, 900);  // above everything: every close misses
     const Eigen::Isometry3d b = base_T(w, tool);

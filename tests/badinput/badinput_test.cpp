@@ -7,14 +7,16 @@
 //
 // CELL_FLOOD_SECONDS sets the flood's length (default 30); CELL_RELIABILITY_OUT a directory
 // where one JSON row per scenario is appended to badinput.jsonl.
-#include <signal.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cmath>
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -91,32 +93,36 @@ class BadInputTest : public ::testing::Test {
   }
 
   ~BadInputTest() override {
-    if (std::filesystem::exists(run_dir_ + "/cell.pid")) {
-      (void)cell::testing::run_tool("cell", {"down", "--profile", profile_, "--timeout", "20"},
-                                    env_, 40s);
-    }
-    for (const auto& [name, pid] : pids()) {  // nothing may outlive the test
-      if (process::pid_alive(pid)) {
-        kill(-pid, SIGKILL);
-        kill(pid, SIGKILL);
+    try {  // a destructor must not throw: a failed cleanup is reported, not fatal
+      if (std::filesystem::exists(run_dir_ + "/cell.pid")) {
+        (void)cell::testing::run_tool("cell", {"down", "--profile", profile_, "--timeout", "20"},
+                                      env_, 40s);
       }
-    }
-    while (waitpid(-1, nullptr, WNOHANG) > 0) {
-    }
-    if (HasFailure()) {
+      for (const auto& [name, pid] : pids()) {  // nothing may outlive the test
+        if (process::pid_alive(pid)) {
+          kill(-pid, SIGKILL);
+          kill(pid, SIGKILL);
+        }
+      }
+      while (waitpid(-1, nullptr, WNOHANG) > 0) {
+      }
+      if (HasFailure()) {
+        std::error_code ec;
+        for (const auto& entry : std::filesystem::directory_iterator(run_dir_ + "/logs", ec)) {
+          const std::string text = read_file(entry.path());
+          std::printf("---- %s (last 3000 chars)\n%s\n", entry.path().filename().c_str(),
+                      text.substr(text.size() > 3000 ? text.size() - 3000 : 0).c_str());
+        }
+      }
       std::error_code ec;
-      for (const auto& entry : std::filesystem::directory_iterator(run_dir_ + "/logs", ec)) {
-        const std::string text = read_file(entry.path());
-        std::printf("---- %s (last 3000 chars)\n%s\n", entry.path().filename().c_str(),
-                    text.substr(text.size() > 3000 ? text.size() - 3000 : 0).c_str());
+      std::filesystem::remove(std::filesystem::path("/dev/shm") / shm_name_.substr(1), ec);
+      if (const char* keep = std::getenv("CELL_BADINPUT_KEEP"); keep != nullptr && *keep == '1') {
+        std::printf("kept %s (CELL_BADINPUT_KEEP=1)\n", dir_.c_str());
+      } else {
+        std::filesystem::remove_all(dir_, ec);
       }
-    }
-    std::error_code ec;
-    std::filesystem::remove(std::filesystem::path("/dev/shm") / shm_name_.substr(1), ec);
-    if (const char* keep = std::getenv("CELL_BADINPUT_KEEP"); keep != nullptr && *keep == '1') {
-      std::printf("kept %s (CELL_BADINPUT_KEEP=1)\n", dir_.c_str());
-    } else {
-      std::filesystem::remove_all(dir_, ec);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "BadInputTest cleanup: %s\n", e.what());
     }
   }
 
@@ -131,7 +137,7 @@ class BadInputTest : public ::testing::Test {
         text.replace(at, from.size(), to);
       }
     }
-    const std::string path = dir_ + "/" + std::filesystem::path(config).filename().string();
+    std::string path = dir_ + "/" + std::filesystem::path(config).filename().string();
     std::ofstream(path) << text;
     return path;
   }
@@ -192,7 +198,7 @@ class BadInputTest : public ::testing::Test {
     return cell::testing::run_tool("cell", args, env_, timeout);
   }
 
-  ToolRun cellctl(std::vector<std::string> args, std::chrono::milliseconds timeout = 30s) {
+  ToolRun cellctl(const std::vector<std::string>& args, std::chrono::milliseconds timeout = 30s) {
     return cell::testing::run_tool("cellctl", args, env_, timeout);
   }
 

@@ -593,7 +593,7 @@ int run(int argc, char** argv) {
         im.width_px = 512;
         im.height_px = 484;
         encoding = "mono8";
-        data.resize(512u * 484u);
+        data.resize(std::size_t{512} * 484);
         for (auto& b : data) {
           b = static_cast<std::uint8_t>(g.below(256));
         }
@@ -753,14 +753,20 @@ int run(int argc, char** argv) {
         c = g.chance(0.5) ? "dip14" : garbage_string(g);
       }
       std::vector<char*> classes;
-      for (auto& c : class_storage) classes.push_back(bus::borrow(c));
+      classes.reserve(class_storage.size());
+      for (auto& c : class_storage) {
+        classes.push_back(bus::borrow(c));
+      }
       bus::borrow(w.classes, classes);
       std::vector<std::string> id_storage(g.chance(0.05) ? 10000 : g.below(5));
       for (auto& id : id_storage) {
         id = fmt::format("no-such-part-{}", g.u64());
       }
       std::vector<char*> ids;
-      for (auto& id : id_storage) ids.push_back(bus::borrow(id));
+      ids.reserve(id_storage.size());
+      for (auto& id : id_storage) {
+        ids.push_back(bus::borrow(id));
+      }
       bus::borrow(w.part_ids, ids);
       std::vector<cell_world_WorldPart> parts(g.below(4));
       std::vector<std::string> strings(parts.size() * 3);

@@ -107,7 +107,7 @@ class CalibrationCellTest : public ::testing::Test {
     for (auto& [name, child] : children_) {
       std::string text;
       (void)child.read_available(text);
-      out += "--- " + name + "\n" + child.output() + text;
+      out += fmt::format("--- {}\n{}{}", name, child.output(), text);
     }
     return out.size() > 20000 ? out.substr(out.size() - 20000) : out;
   }
@@ -145,7 +145,7 @@ class CalibrationCellTest : public ::testing::Test {
     const bool fixed = c["mounting"] == "fixed";
     out.mounting = fixed ? cal::Mounting::kFixed : cal::Mounting::kEyeInHand;
     out.mount_frame = render::MountFrame::kLink2;
-    const json p = c[fixed ? "base_T_camera" : "mount_T_camera"];
+    const json& p = c[fixed ? "base_T_camera" : "mount_T_camera"];
     out.extrinsics = geometry::make_pose(
         {p["x_mm"].get<double>(), p["y_mm"].get<double>(), p["z_mm"].get<double>()},
         geometry::Rpy{p["roll_deg"].get<double>() * kDeg, p["pitch_deg"].get<double>() * kDeg,

@@ -77,7 +77,7 @@ class CameraCellTest : public ::testing::Test {
     for (auto& [name, child] : children_) {
       std::string text;
       (void)child.read_available(text);
-      out += "--- " + name + "\n" + child.output() + text;
+      out += fmt::format("--- {}\n{}{}", name, child.output(), text);
     }
     return out;
   }

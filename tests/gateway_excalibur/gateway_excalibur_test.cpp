@@ -355,7 +355,7 @@ TEST_F(GatewayExcaliburTest, ThousandMovesWithOnePercentLineNoiseEndAtTargetOrRe
     } else {
       ++failed;
       EXPECT_FALSE(why.empty()) << id << " failed without saying why";
-      failures.push_back(id + ": " + why);
+      failures.push_back(fmt::format("{}: {}", id, why));
       reset();
     }
   }

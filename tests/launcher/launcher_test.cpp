@@ -1,14 +1,15 @@
 // Multi-process tests of `cell up/down/status`, `cellctl ping` and cell-echo: the real
 // executables on a private domain/partition (CELL_DOMAIN_ID/CELL_PARTITION), with a temporary
 // run directory and profile per test. Every wait is a condition with a deadline.
-#include <signal.h>
-#include <stdlib.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -73,24 +74,28 @@ class LauncherTest : public ::testing::Test {
   }
 
   ~LauncherTest() override {
-    if (std::filesystem::exists(run_dir_ + "/cell.pid")) {
-      (void)run_cell({"down", "--timeout", "10"});
-    }
-    for (const pid_t pid : service_pids()) {  // belt and braces: nothing may outlive a test
-      if (!gone(pid)) {
-        kill(-pid, SIGKILL);
-        kill(pid, SIGKILL);
+    try {  // a destructor must not throw: a failed cleanup is reported, not fatal
+      if (std::filesystem::exists(run_dir_ + "/cell.pid")) {
+        (void)run_cell({"down", "--timeout", "10"});
       }
+      for (const pid_t pid : service_pids()) {  // belt and braces: nothing may outlive a test
+        if (!gone(pid)) {
+          kill(-pid, SIGKILL);
+          kill(pid, SIGKILL);
+        }
+      }
+      while (waitpid(-1, nullptr, WNOHANG) > 0) {
+      }
+      std::error_code ec;
+      std::filesystem::remove_all(dir_, ec);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "LauncherTest cleanup: %s\n", e.what());
     }
-    while (waitpid(-1, nullptr, WNOHANG) > 0) {
-    }
-    std::error_code ec;
-    std::filesystem::remove_all(dir_, ec);
   }
 
   /// Writes an echo config with the fast heartbeat the tests need plus `extra` YAML lines.
   std::string echo_config(const std::string& name, const std::string& extra = {}) {
-    const std::string path = fmt::format("{}/{}.yaml", dir_, name);
+    std::string path = fmt::format("{}/{}.yaml", dir_, name);
     std::ofstream(path) << "service:\n  heartbeat_period_s: 0.2\n  stall_timeout_s: 1.0\n" << extra;
     return path;
   }

@@ -9,12 +9,12 @@
 //
 // Needs root, /dev/net/tun, `ip` and `nft`. Not thread-safe.
 
-#include <signal.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -191,6 +191,8 @@ class Lab {
   }
 
   /// One command line to the router, its one-line answer ("" and a test failure on error).
+  /// Not const: commands such as `reset` and `delay` change the router this lab owns.
+  // NOLINTNEXTLINE(readability-make-member-function-const): reset/delay mutate the lab
   std::string router(const std::string& line) {
     const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
     sockaddr_un addr{};
@@ -291,7 +293,7 @@ class Lab {
   /// Runs `argv` in `host`'s namespace to completion; exit code and merged output.
   ShellRun run_in(const std::string& host, const std::vector<std::string>& argv,
                   const std::vector<std::string>& env = {},
-                  std::chrono::milliseconds timeout = 60s) {
+                  std::chrono::milliseconds timeout = 60s) const {
     process::SpawnOptions options;
     options.executable = "ip";
     options.args = {"netns", "exec", ns(host), "unshare", "--uts", "sh", "-c",
@@ -359,7 +361,7 @@ class Lab {
     for (auto& [label, c] : children_) {
       std::string text;
       (void)c.read_available(text);
-      out += "---- " + label + "\n" + c.output() + text;
+      out += fmt::format("---- {}\n{}{}", label, c.output(), text);
     }
     return out;
   }

@@ -32,7 +32,7 @@ constexpr double k7545BaseZ = 981.51;
 constexpr double kPickerBaseX = 1000.0;
 constexpr double kPickerBaseZ = 960.0;
 /// One frame of the 7545's camera: 512 x 484 px, 8-bit grey (config/cameras/ibm7545_eye.yaml).
-constexpr std::uint64_t kImageBytes = 512 * 484;
+constexpr std::uint64_t kImageBytes = std::uint64_t{512} * 484;
 constexpr int kTableParts = 4;
 
 constexpr const char* kTableScene = R"(name: netlab_table
@@ -172,7 +172,7 @@ class ThreePcCellTest : public ::testing::Test {
   std::string run_dir(const std::string& host) const { return lab_.dir() + "/" + host; }
 
   std::string write(const std::string& name, const std::string& text) {
-    const std::string path = lab_.dir() + "/" + name;
+    std::string path = lab_.dir() + "/" + name;
     std::ofstream(path) << text;
     return path;
   }
@@ -291,7 +291,7 @@ class ThreePcCellTest : public ::testing::Test {
     return object(parsed(cellctl({"--json", "robot", "state", "--robot", robot}, host)));
   }
 
-  static json object(json j) { return j.is_object() ? j : json::object(); }
+  static json object(const json& j) { return j.is_object() ? j : json::object(); }
 
   json world_parts() {
     const ShellRun run = cellctl({"--json", "world", "parts"});

@@ -43,7 +43,7 @@ double settled_median_us(std::vector<double> v) {
 class NetlabTest : public ::testing::Test {
  protected:
   std::string write_xml(const std::string& host) {
-    const std::string path = lab_.dir() + "/" + host + ".xml";
+    std::string path = lab_.dir() + "/" + host + ".xml";
     std::ofstream(path) << hand_written_dds_xml(Lab::host(host).address);
     return path;
   }

@@ -179,7 +179,7 @@ class SecureCell : public ::testing::Test {
     for (auto& [name, c] : children_) {
       std::string text;
       (void)c.read_available(text);
-      out += "---- " + name + "\n" + c.output() + text;
+      out.append("---- ").append(name).append("\n").append(c.output()).append(text);
     }
     return out;
   }

@@ -9,7 +9,9 @@
 // 4 a writer or reader was refused (BusError, DDS_RETCODE_NOT_ALLOWED_BY_SECURITY = -13 when
 // access control denies it); 5 no answer in time; 2 usage.
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <iostream>
 #include <set>
 #include <string>
@@ -131,7 +133,7 @@ int submit(const bus::Participant& participant, const std::string& job_id,
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int main_body(int argc, char** argv) {
   if (argc < 2) {
     std::cerr << "usage: security_probe listen|submit [--seconds S] [--job-id ID]\n";
     return kExitUsage;
@@ -171,4 +173,16 @@ int main(int argc, char** argv) {
                       {"cyclonedds_uri", env_or("CYCLONEDDS_URI", "")}},
                  kExitParticipant);
   }
+}
+
+// Nothing escapes main: an exception is printed and fails the run.
+int main(int argc, char** argv) {
+  try {
+    return main_body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "security_probe: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "security_probe: an exception not derived from std::exception\n");
+  }
+  return 1;
 }

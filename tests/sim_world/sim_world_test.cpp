@@ -61,7 +61,7 @@ class SimWorldCellTest : public ::testing::Test {
   }
 
   std::string write(const std::string& name, const std::string& text) {
-    const std::string path = dir_ + "/" + name;
+    std::string path = dir_ + "/" + name;
     std::ofstream(path) << text;
     return path;
   }
@@ -147,7 +147,7 @@ class SimWorldCellTest : public ::testing::Test {
     for (auto& [name, child] : children_) {
       std::string text;
       child.read_available(text);
-      out += "---- " + name + "\n" + child.output() + text;
+      out += fmt::format("---- {}\n{}{}", name, child.output(), text);
     }
     return out;
   }

@@ -6,8 +6,7 @@
 // simulator's truth within 0.5 mm and 0.5 deg, and the same job with its vision package
 // switched off (verify: false) must leave them broken.
 
-#include <signal.h>
-
+#include <csignal>
 #include <numbers>
 #include <random>
 #include <set>

@@ -4,11 +4,11 @@
 // driven by cellctl like an operator would. Ground truth comes from the world simulator
 // (`cellctl world parts --json`). Every wait is a condition with a deadline.
 
-#include <signal.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -80,7 +80,7 @@ class TaskCell : public ::testing::Test {
   }
 
   std::string write(const std::string& name, const std::string& text) {
-    const std::string path = dir_ + "/" + name;
+    std::string path = dir_ + "/" + name;
     std::ofstream(path) << text;
     return path;
   }

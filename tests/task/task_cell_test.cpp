@@ -45,6 +45,7 @@ TEST_F(TaskCellTest, TableJobFromScratchPutsEveryScatteredIcInItsSlot) {
 }
 
 /// What a conveyor run left, by ground truth and by the job's counters.
+// NOLINTNEXTLINE(bugprone-exception-escape): plain struct; tidy 14 blames json's members
 struct BeltOutcome {
   int in_bin = 0;    ///< beside the belt at the job's slot, picker (100, -300)
   int fell_off = 0;  ///< fallen off the belt's end: missed

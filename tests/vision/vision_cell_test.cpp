@@ -63,7 +63,7 @@ class VisionCellTest : public ::testing::Test {
   }
 
   std::string write(const std::string& name, const std::string& text) {
-    const std::string p = dir_ + "/" + name;
+    std::string p = dir_ + "/" + name;
     std::ofstream(p) << text;
     return p;
   }
@@ -83,7 +83,7 @@ class VisionCellTest : public ::testing::Test {
     for (auto& [name, child] : children_) {
       std::string text;
       (void)child.read_available(text);
-      out += "--- " + name + "\n" + child.output() + text;
+      out += fmt::format("--- {}\n{}{}", name, child.output(), text);
     }
     return out;
   }

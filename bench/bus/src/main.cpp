@@ -4,6 +4,7 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <string>
 #include <thread>
@@ -316,7 +317,7 @@ int run_bench(const Options& options, std::uint32_t domain) {
           log::error("stream_failed", result.error().message);
           return kExitFailed;
         }
-        report.streams.push_back(std::move(*result));
+        report.streams.push_back(*result);
       }
     }
   } catch (const bus::BusError& e) {
@@ -334,7 +335,7 @@ int run_bench(const Options& options, std::uint32_t domain) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int main_body(int argc, char** argv) {
   Options options;
   CLI::App app("Bus benchmark: cell::bus round trip vs ddsperf, and a 1 kHz RobotState stream",
                "bus_bench");
@@ -416,4 +417,16 @@ int main(int argc, char** argv) {
     setenv("CYCLONEDDS_URI", CELL_BENCH_DDS_URI, 1);
   }
   return run_bench(options, *domain);
+}
+
+// Nothing escapes main: an exception is printed and fails the run.
+int main(int argc, char** argv) {
+  try {
+    return main_body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bus_bench: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "bus_bench: an exception not derived from std::exception\n");
+  }
+  return 1;
 }

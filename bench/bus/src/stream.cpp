@@ -1,12 +1,12 @@
 #include "stream.hpp"
 
 #include <sched.h>
-#include <time.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 #include <optional>
 #include <string>
 #include <thread>

@@ -1,7 +1,6 @@
 #include "commands.hpp"
 
 #include <fcntl.h>
-#include <signal.h>
 #include <sys/signalfd.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -9,6 +8,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -491,7 +491,10 @@ int run_status(const StatusOptions& options) {
       } else {
         why = "no heartbeat from host " + spec.host;
       }
-      detail = detail.empty() ? why : detail + "; " + why;
+      if (!detail.empty()) {
+        detail += "; ";
+      }
+      detail += why;
     }
     const std::string where = entry != nullptr           ? entry->host
                               : is_local_host(spec.host) ? this_host()

@@ -2,7 +2,6 @@
 
 #include <fcntl.h>
 #include <poll.h>
-#include <signal.h>
 #include <sys/signalfd.h>
 #include <unistd.h>
 
@@ -10,6 +9,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstring>
 #include <deque>
 #include <filesystem>
@@ -28,11 +28,11 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-constexpr double kStartupGraceS = 1.0;       // starting -> running after this long alive
-constexpr std::size_t kTailLines = 20;       // output lines kept to explain a failure
-constexpr std::size_t kHistory = 10;         // exits kept in status.json
-constexpr std::size_t kMaxLine = 64 * 1024;  // a longer line without '\n' is cut
-constexpr int kExitConfig = 2;               // services' usage/config error (service/runtime.hpp)
+constexpr double kStartupGraceS = 1.0;  // starting -> running after this long alive
+constexpr std::size_t kTailLines = 20;  // output lines kept to explain a failure
+constexpr std::size_t kHistory = 10;    // exits kept in status.json
+constexpr std::size_t kMaxLine = std::size_t{64} * 1024;  // a longer line without '\n' is cut
+constexpr int kExitConfig = 2;  // services' usage/config error (service/runtime.hpp)
 
 void write_all(int fd, std::string_view data) noexcept {
   while (!data.empty()) {
@@ -581,7 +581,7 @@ Result<LaunchPlan> make_plan(const Profile& profile,
       std::erase_if(launch.env, [&key = key](const std::string& entry) {
         return entry.compare(0, key.size() + 1, key + "=") == 0;
       });
-      launch.env.push_back(key + "=" + value);
+      launch.env.push_back(fmt::format("{}={}", key, value));
     }
     launch.log_file = plan.paths.service_log(spec.name);
     plan.services.push_back(std::move(launch));

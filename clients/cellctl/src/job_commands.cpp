@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <filesystem>
 #include <fstream>
@@ -115,7 +116,7 @@ json status_json(const cell_task_JobStatus& s, bool with_parts) {
 }
 
 std::string bar(double fraction) {
-  const int n = static_cast<int>(std::clamp(fraction, 0.0, 1.0) * 30 + 0.5);
+  const int n = static_cast<int>(std::lround(std::clamp(fraction, 0.0, 1.0) * 30));
   return "[" + std::string(static_cast<std::size_t>(n), '#') +
          std::string(static_cast<std::size_t>(30 - n), '.') + "]";
 }

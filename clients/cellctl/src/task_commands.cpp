@@ -3,10 +3,10 @@
 // and edit it, and play it back on the robot (MotionRequests to the motion service, gripper
 // commands to the gateway) or off line (the motion planner's plan, nothing moves).
 #include <pthread.h>
-#include <signal.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <csignal>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -217,8 +217,7 @@ Result<std::string> record_step(Session& session, Loaded& t, const TaskArgs& arg
   if (args.speed) {
     pose->speed_scale = *args.speed;
   }
-  const std::string text =
-      fmt::format("pose '{}' at {}", pose->name, joints_text(t.model, pose->joints));
+  std::string text = fmt::format("pose '{}' at {}", pose->name, joints_text(t.model, pose->joints));
   CELL_TRY(t.task.insert(at, std::move(*pose)));
   return text;
 }

@@ -233,6 +233,7 @@ int scatter(Session& session, const WorldArgs& args) {
     classes.push_back(c);
   }
   std::vector<char*> names;
+  names.reserve(classes.size());
   for (const auto& c : classes) {
     names.push_back(bus::borrow(c));
   }

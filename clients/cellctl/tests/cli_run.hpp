@@ -23,6 +23,7 @@ struct CliRun {
 inline CliRun cellctl(std::vector<std::string> args) {
   args.insert(args.begin(), "cellctl");
   std::vector<const char*> argv;
+  argv.reserve(args.size());
   for (const auto& a : args) {
     argv.push_back(a.c_str());
   }

@@ -46,7 +46,7 @@ class LocateCommandsTest : public ::testing::Test {
     return path(name);
   }
   std::string save_true_calibration() {
-    const std::string p = path("true.yaml");
+    std::string p = path("true.yaml");
     EXPECT_TRUE(calibration::save_camera_calibration(Cell::get().true_calibration(), p));
     return p;
   }

@@ -36,7 +36,7 @@ class RaptCommandsTest : public ::testing::Test {
     rmdir(dir_.c_str());
   }
   std::string write(const std::string& name, const std::string& text) {
-    const std::string path = dir_ + "/" + name;
+    std::string path = dir_ + "/" + name;
     std::ofstream(path) << text;
     files_.push_back(path);
     return path;

@@ -61,7 +61,7 @@ class CellctlWorldTest : public ::testing::Test {
 
   /// A temporary scene file with `text`.
   std::string scene_file(const std::string& text) {
-    const std::string path = ::testing::TempDir() + "/" + partition_ + "_scene.yaml";
+    std::string path = ::testing::TempDir() + "/" + partition_ + "_scene.yaml";
     std::ofstream(path) << text;
     return path;
   }

@@ -4,7 +4,9 @@
 #include <termios.h>
 #include <unistd.h>
 
+#include <cstdio>
 #include <cstring>
+#include <exception>
 #include <iostream>
 #include <string>
 
@@ -48,7 +50,12 @@ int hash_password(int argc, char** argv) {
 
 int main(int argc, char** argv) {
   if (argc >= 2 && std::strcmp(argv[1], "--hash-password") == 0) {
-    return hash_password(argc, argv);
+    try {
+      return hash_password(argc, argv);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "cell-monitor: %s\n", e.what());
+      return 1;
+    }
   }
   using namespace cell;
   return service::run<monitor::MonitorConfig, monitor::MonitorService>(

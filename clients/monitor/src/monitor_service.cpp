@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <stdexcept>
+#include <utility>
 
 #include <fmt/format.h>
 #include <opencv2/imgcodecs.hpp>
@@ -260,7 +261,7 @@ MonitorService::MonitorService(service::Context& ctx, const MonitorConfig& confi
   // to six connections alive per host) and for commands that wait on the bus.
   const std::size_t pool = 2 * static_cast<std::size_t>(config_.max_stream_clients) + 8;
   server_->new_task_queue = [pool] { return new httplib::ThreadPool(pool); };
-  server_->set_payload_max_length(64 * 1024);
+  server_->set_payload_max_length(std::size_t{64} * 1024);
   server_->set_keep_alive_max_count(1000);
   server_->set_keep_alive_timeout(2);  // an idle keep-alive connection holds a pool thread
   server_->set_read_timeout(10, 0);
@@ -816,7 +817,7 @@ void MonitorService::setup_routes() {
       [](const httplib::Request& req, httplib::Response& res, std::exception_ptr ep) {
         std::string what = "unknown error";
         try {
-          std::rethrow_exception(ep);
+          std::rethrow_exception(std::move(ep));
         } catch (const std::exception& e) {
           what = e.what();
         } catch (...) {

@@ -2,6 +2,8 @@
 // (codec's robot_model_json) and core/kinematics' forward kinematics of random joint vectors
 // within each robot's limits, as JSON on stdout. web/tests/fk_agreement.test.mjs computes the
 // browser's FK of the same joints and compares (ctest monitor_web.fk_agrees_with_core_kinematics).
+#include <cstdio>
+#include <exception>
 #include <iostream>
 #include <random>
 #include <string>
@@ -11,7 +13,7 @@
 #include "cell/kinematics/robot_config.hpp"
 #include "codec.hpp"
 
-int main(int argc, char** argv) {
+static int main_body(int argc, char** argv) {
   using namespace cell;
   if (argc != 2) {
     std::cerr << "usage: monitor_fk_cases SOURCE_DIR\n";
@@ -58,4 +60,16 @@ int main(int argc, char** argv) {
   }
   std::cout << monitor::to_text({{"robots", robots}, {"cases", cases}}) << "\n";
   return 0;
+}
+
+// Nothing escapes main: an exception is printed and fails the run.
+int main(int argc, char** argv) {
+  try {
+    return main_body(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "monitor_fk_cases: %s\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "monitor_fk_cases: an exception not derived from std::exception\n");
+  }
+  return 1;
 }

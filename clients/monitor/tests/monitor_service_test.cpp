@@ -92,7 +92,7 @@ class MonitorServiceTest : public ::testing::Test {
     if (!cookie.empty()) {
       headers.emplace("Cookie", cookie);
     }
-    return http_.Post(path.c_str(), headers, body.dump(), type.c_str());
+    return http_.Post(path, headers, body.dump(), type);
   }
 
   void publish_state(double j1_deg, std::int64_t stamp_ns) {

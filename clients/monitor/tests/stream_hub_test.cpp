@@ -14,6 +14,7 @@ std::vector<std::string> drain(ClientQueue& q) {
   std::vector<std::shared_ptr<const std::string>> frames;
   q.pop_all(frames, 0ms);
   std::vector<std::string> out;
+  out.reserve(frames.size());
   for (const auto& f : frames) {
     out.push_back(*f);
   }

@@ -100,65 +100,71 @@ Result<BeltCalibration> parse_belt_calibration(const std::string& text, const st
   return parse_belt_document(*doc);
 }
 
-std::string format_belt_calibration(const BeltCalibration& b) {
+std::string format_belt_calibration(const BeltCalibration& calibration) {
   std::string out;
   out += "# A belt calibration (core/calibration/README.md: keys, frames and units).\n";
-  out += fmt::format("belt_id: {}\n", YAML::Dump(YAML::Node(b.belt_id)));
-  out += fmt::format("robot_id: {}\n", YAML::Dump(YAML::Node(b.robot_id)));
-  out += fmt::format("camera_id: {}\n", YAML::Dump(YAML::Node(b.camera_id)));
-  out += fmt::format("version: {}\n", YAML::Dump(YAML::Node(b.version)));
-  out += fmt::format("created_utc: {}\n", YAML::Dump(YAML::Node(b.created_utc)));
-  out += fmt::format("source: {}\n", YAML::Dump(YAML::Node(b.source)));
-  out += fmt::format("mm_per_count: {}\n", exact_number(b.mm_per_count));
-  out += fmt::format("direction: [{}, {}, {}]   # unit, base frame, for rising counts\n",
-                     exact_number(b.direction.x()), exact_number(b.direction.y()), exact_number(b.direction.z()));
-  out += fmt::format("origin_mm: [{}, {}, {}]   # the reference part at count 0, base frame\n",
-                     exact_number(b.origin_mm.x()), exact_number(b.origin_mm.y()), exact_number(b.origin_mm.z()));
+  out += fmt::format("belt_id: {}\n", YAML::Dump(YAML::Node(calibration.belt_id)));
+  out += fmt::format("robot_id: {}\n", YAML::Dump(YAML::Node(calibration.robot_id)));
+  out += fmt::format("camera_id: {}\n", YAML::Dump(YAML::Node(calibration.camera_id)));
+  out += fmt::format("version: {}\n", YAML::Dump(YAML::Node(calibration.version)));
+  out += fmt::format("created_utc: {}\n", YAML::Dump(YAML::Node(calibration.created_utc)));
+  out += fmt::format("source: {}\n", YAML::Dump(YAML::Node(calibration.source)));
+  out += fmt::format("mm_per_count: {}\n", exact_number(calibration.mm_per_count));
+  out +=
+      fmt::format("direction: [{}, {}, {}]   # unit, base frame, for rising counts\n",
+                  exact_number(calibration.direction.x()), exact_number(calibration.direction.y()),
+                  exact_number(calibration.direction.z()));
+  out +=
+      fmt::format("origin_mm: [{}, {}, {}]   # the reference part at count 0, base frame\n",
+                  exact_number(calibration.origin_mm.x()), exact_number(calibration.origin_mm.y()),
+                  exact_number(calibration.origin_mm.z()));
   out += fmt::format("quality:\n  rms_mm: {}\n  holdout_mm: {}\n  sample_count: {}\n",
-                     exact_number(b.rms_mm), exact_number(b.holdout_mm), b.sample_count);
+                     exact_number(calibration.rms_mm), exact_number(calibration.holdout_mm),
+                     calibration.sample_count);
   return out;
 }
 
-Status save_belt_calibration(const BeltCalibration& b, const std::string& path) {
-  CELL_TRY(b.validate());
-  return detail::write_atomically(path, format_belt_calibration(b));
+Status save_belt_calibration(const BeltCalibration& calibration, const std::string& path) {
+  CELL_TRY(calibration.validate());
+  return detail::write_atomically(path, format_belt_calibration(calibration));
 }
 
-cell_calibration_BeltCalibration to_idl(const BeltCalibration& b, BeltIdlHolder& holder,
+cell_calibration_BeltCalibration to_idl(const BeltCalibration& calibration,
+                                        BeltIdlHolder& holder,
                                         std::int64_t stamp_ns) {
-  holder.frame_id = b.robot_id + "/base";
+  holder.frame_id = calibration.robot_id + "/base";
   cell_calibration_BeltCalibration m{};
-  m.belt_id = bus::borrow(b.belt_id);
+  m.belt_id = bus::borrow(calibration.belt_id);
   m.header.stamp_ns = stamp_ns;
   m.header.frame_id = bus::borrow(holder.frame_id);
-  m.robot_id = bus::borrow(b.robot_id);
-  m.mm_per_count = b.mm_per_count;
-  m.direction = {b.direction.x(), b.direction.y(), b.direction.z()};
-  m.origin_mm = {b.origin_mm.x(), b.origin_mm.y(), b.origin_mm.z()};
-  m.rms_mm = b.rms_mm;
-  m.sample_count = b.sample_count;
-  m.version = bus::borrow(b.version);
-  m.created_utc = bus::borrow(b.created_utc);
-  m.source = bus::borrow(b.source);
-  m.holdout_mm = b.holdout_mm;
-  m.camera_id = bus::borrow(b.camera_id);
+  m.robot_id = bus::borrow(calibration.robot_id);
+  m.mm_per_count = calibration.mm_per_count;
+  m.direction = {calibration.direction.x(), calibration.direction.y(), calibration.direction.z()};
+  m.origin_mm = {calibration.origin_mm.x(), calibration.origin_mm.y(), calibration.origin_mm.z()};
+  m.rms_mm = calibration.rms_mm;
+  m.sample_count = calibration.sample_count;
+  m.version = bus::borrow(calibration.version);
+  m.created_utc = bus::borrow(calibration.created_utc);
+  m.source = bus::borrow(calibration.source);
+  m.holdout_mm = calibration.holdout_mm;
+  m.camera_id = bus::borrow(calibration.camera_id);
   return m;
 }
 
-Result<BeltCalibration> from_idl(const cell_calibration_BeltCalibration& m) {
+Result<BeltCalibration> from_idl(const cell_calibration_BeltCalibration& sample) {
   BeltCalibration b;
-  b.belt_id = std::string(bus::str(m.belt_id));
-  b.robot_id = std::string(bus::str(m.robot_id));
-  b.mm_per_count = m.mm_per_count;
-  b.direction = Eigen::Vector3d(m.direction.x, m.direction.y, m.direction.z);
-  b.origin_mm = Eigen::Vector3d(m.origin_mm.x, m.origin_mm.y, m.origin_mm.z);
-  b.rms_mm = m.rms_mm;
-  b.sample_count = m.sample_count;
-  b.version = std::string(bus::str(m.version));
-  b.created_utc = std::string(bus::str(m.created_utc));
-  b.source = std::string(bus::str(m.source));
-  b.holdout_mm = m.holdout_mm;
-  b.camera_id = std::string(bus::str(m.camera_id));
+  b.belt_id = std::string(bus::str(sample.belt_id));
+  b.robot_id = std::string(bus::str(sample.robot_id));
+  b.mm_per_count = sample.mm_per_count;
+  b.direction = Eigen::Vector3d(sample.direction.x, sample.direction.y, sample.direction.z);
+  b.origin_mm = Eigen::Vector3d(sample.origin_mm.x, sample.origin_mm.y, sample.origin_mm.z);
+  b.rms_mm = sample.rms_mm;
+  b.sample_count = sample.sample_count;
+  b.version = std::string(bus::str(sample.version));
+  b.created_utc = std::string(bus::str(sample.created_utc));
+  b.source = std::string(bus::str(sample.source));
+  b.holdout_mm = sample.holdout_mm;
+  b.camera_id = std::string(bus::str(sample.camera_id));
   CELL_TRY(b.validate());
   return b;
 }

@@ -72,15 +72,19 @@ int half_window(const std::vector<cv::Point2f>& corners, int columns, int rows,
   if (options.subpixel_half_window_px > 0) {
     return options.subpixel_half_window_px;
   }
+  auto corner = [&](int i, int j) -> const cv::Point2f& {
+    return corners[static_cast<std::size_t>(i) +
+                   static_cast<std::size_t>(columns) * static_cast<std::size_t>(j)];
+  };
   double spacing = 1e9;
   for (int j = 0; j < rows; ++j) {
     for (int i = 0; i < columns; ++i) {
-      const cv::Point2f& p = corners[static_cast<std::size_t>(i + columns * j)];
+      const cv::Point2f& p = corner(i, j);
       if (i + 1 < columns) {
-        spacing = std::min(spacing, cv::norm(corners[static_cast<std::size_t>(i + 1 + columns * j)] - p));
+        spacing = std::min(spacing, cv::norm(corner(i + 1, j) - p));
       }
       if (j + 1 < rows) {
-        spacing = std::min(spacing, cv::norm(corners[static_cast<std::size_t>(i + columns * (j + 1))] - p));
+        spacing = std::min(spacing, cv::norm(corner(i, j + 1) - p));
       }
     }
   }
@@ -94,14 +98,15 @@ Result<BoardObservation> detect_chessboard(const cv::Mat& image, const BoardSpec
   std::vector<cv::Point2f> corners;
   const bool found = cv::findChessboardCorners(
       image, cv::Size(c, r), corners, cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE);
-  if (!found || corners.size() != static_cast<std::size_t>(c * r)) {
+  if (!found || corners.size() != static_cast<std::size_t>(c) * static_cast<std::size_t>(r)) {
     return Error{Errc::kOutOfRange, fmt::format("no {} found", board.describe())};
   }
   const int w = half_window(corners, c, r, options);
   cv::cornerSubPix(image, corners, cv::Size(w, w), cv::Size(-1, -1),
                    cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 60, 1e-5));
   auto at = [&](int i, int j) -> cv::Point2f& {
-    return corners[static_cast<std::size_t>(i + c * j)];
+    return corners[static_cast<std::size_t>(i) +
+                   static_cast<std::size_t>(c) * static_cast<std::size_t>(j)];
   };
   // Seen from its printed side, the board's x and y axes appear left-handed in (u, v) (its z
   // points back at the camera): a right-handed labelling is OpenCV's mirrored order.

@@ -343,11 +343,11 @@ cell_calibration_CameraCalibration to_idl(const CameraCalibration& c, IdlHolder&
   return m;
 }
 
-Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) {
+Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& sample) {
   CameraCalibration c;
-  c.camera_id = std::string(bus::str(m.camera_id));
+  c.camera_id = std::string(bus::str(sample.camera_id));
   // Any value may come off the wire: the enums are read as integers (bus::raw).
-  switch (bus::raw(m.model)) {
+  switch (bus::raw(sample.model)) {
     case cell_calibration_CAMERA_PINHOLE:
       c.model = ModelType::kPinhole;
       break;
@@ -355,9 +355,10 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
       c.model = ModelType::kPlanar7545;
       break;
     default:
-      return invalid_camera(c.camera_id, fmt::format("unknown model type {}", bus::raw(m.model)));
+      return invalid_camera(c.camera_id,
+                            fmt::format("unknown model type {}", bus::raw(sample.model)));
   }
-  switch (bus::raw(m.mounting)) {
+  switch (bus::raw(sample.mounting)) {
     case cell_calibration_MOUNT_FIXED:
       c.mounting = Mounting::kFixed;
       break;
@@ -365,9 +366,10 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
       c.mounting = Mounting::kEyeInHand;
       break;
     default:
-      return invalid_camera(c.camera_id, fmt::format("unknown mounting {}", bus::raw(m.mounting)));
+      return invalid_camera(c.camera_id,
+                            fmt::format("unknown mounting {}", bus::raw(sample.mounting)));
   }
-  const std::string_view frame = bus::str(m.mount_frame);
+  const std::string_view frame = bus::str(sample.mount_frame);
   if (c.mounting == Mounting::kEyeInHand) {
     if (frame == "tool") {
       c.mount_frame = render::MountFrame::kTool;
@@ -378,33 +380,35 @@ Result<CameraCalibration> from_idl(const cell_calibration_CameraCalibration& m) 
                                               frame));
     }
   }
-  c.robot_id = std::string(bus::str(m.robot_id));
-  c.width_px = static_cast<int>(std::min<std::uint32_t>(m.width_px, 1U << 30));
-  c.height_px = static_cast<int>(std::min<std::uint32_t>(m.height_px, 1U << 30));
-  const auto d = bus::span(m.distortion);
-  if (d.size() != 0 && d.size() != 5) {
+  c.robot_id = std::string(bus::str(sample.robot_id));
+  c.width_px = static_cast<int>(std::min<std::uint32_t>(sample.width_px, 1U << 30));
+  c.height_px = static_cast<int>(std::min<std::uint32_t>(sample.height_px, 1U << 30));
+  const auto d = bus::span(sample.distortion);
+  if (!d.empty() && d.size() != 5) {
     return invalid_camera(c.camera_id, fmt::format("distortion has {} coefficients; 0 or 5 (k1 k2 p1 p2 "
                                             "k3) expected",
                                             d.size()));
   }
-  c.pinhole = PinholeParameters{m.fx_px, m.fy_px, m.cx_px, m.cy_px, {}};
+  c.pinhole = PinholeParameters{sample.fx_px, sample.fy_px, sample.cx_px, sample.cy_px, {}};
   if (d.size() == 5) {
     c.pinhole.distortion = render::Distortion{d[0], d[1], d[2], d[3], d[4]};
   }
   if (c.model == ModelType::kPinhole) {
-    auto pose = geometry::pose_from_idl(m.extrinsics);
+    auto pose = geometry::pose_from_idl(sample.extrinsics);
     if (!pose) {
       return invalid_camera(c.camera_id, "extrinsics: " + pose.error().message);
     }
     c.extrinsics = *pose;
   }
-  c.working_plane_z_mm = m.working_plane_z_mm;
-  c.planar = PlanarParameters{m.c_x_px_per_mm, m.c_y_px_per_mm, m.ref_u_px,   m.ref_v_px,
-                              m.center_u_px,   m.center_v_px,   m.d_t_c_mm,   m.b_angl_rad,
-                              m.angl_err_rad,  m.link1_mm,      m.link2_mm,   m.camera_height_mm};
-  c.quality = Quality{m.rms_px, m.holdout_rms_px, m.holdout_rms_mm, m.sample_count};
-  c.version = std::string(bus::str(m.version));
-  c.source = std::string(bus::str(m.source));
+  c.working_plane_z_mm = sample.working_plane_z_mm;
+  c.planar = PlanarParameters{sample.c_x_px_per_mm, sample.c_y_px_per_mm, sample.ref_u_px,
+                              sample.ref_v_px,      sample.center_u_px,   sample.center_v_px,
+                              sample.d_t_c_mm,      sample.b_angl_rad,    sample.angl_err_rad,
+                              sample.link1_mm,      sample.link2_mm,      sample.camera_height_mm};
+  c.quality =
+      Quality{sample.rms_px, sample.holdout_rms_px, sample.holdout_rms_mm, sample.sample_count};
+  c.version = std::string(bus::str(sample.version));
+  c.source = std::string(bus::str(sample.source));
   CELL_TRY(c.validate());
   return c;
 }

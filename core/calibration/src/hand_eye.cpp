@@ -158,6 +158,7 @@ Result<Eigen::Isometry3d> closed_form(const std::vector<Eigen::Isometry3d>& a,
       x = setup == HandEyeSetup::kEyeInHand ? gripper2cam.inverse() : base2world.inverse();
     } else {
       std::vector<Eigen::Isometry3d> gripper2base;
+      gripper2base.reserve(a.size());
       for (const auto& p : a) {
         gripper2base.push_back(setup == HandEyeSetup::kEyeInHand ? p : p.inverse());
       }
@@ -246,7 +247,7 @@ Result<std::pair<Eigen::Isometry3d, Eigen::Isometry3d>> planar_closed_form(
     rhs.segment<2>(row) = a[i].translation().head<2>();
   }
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(m, Eigen::ComputeThinU | Eigen::ComputeThinV);
-  const auto sv = svd.singularValues();
+  const auto& sv = svd.singularValues();
   if (sv(sv.size() - 1) < 1e-9 * sv(0)) {
     return Error{Errc::kOutOfRange,
                  "planar hand-eye: the poses do not determine the horizontal offsets (too little "
@@ -421,20 +422,19 @@ Status HandEyeOptions::validate() const {
   return ok_status();
 }
 
-MotionSpread motion_spread(const std::vector<Eigen::Isometry3d>& poses) {
+MotionSpread motion_spread(const std::vector<Eigen::Isometry3d>& base_T_mount) {
   MotionSpread s;
   std::vector<Eigen::Vector3d> axes;       // in the mount frame (eye-in-hand's AX = XB)
   std::vector<Eigen::Vector3d> base_axes;  // in the base frame (eye-to-hand's)
-  std::vector<bool> duplicate(poses.size(), false);
-  for (std::size_t i = 0; i < poses.size(); ++i) {
+  std::vector<bool> duplicate(base_T_mount.size(), false);
+  for (std::size_t i = 0; i < base_T_mount.size(); ++i) {
     s.max_tilt_deg = std::max(
-        s.max_tilt_deg,
-        std::acos(std::clamp(poses[i].linear()(2, 2), -1.0, 1.0)) / kDeg);
-    for (std::size_t j = i + 1; j < poses.size(); ++j) {
-      const Eigen::Isometry3d rel = poses[i].inverse() * poses[j];
+        s.max_tilt_deg, std::acos(std::clamp(base_T_mount[i].linear()(2, 2), -1.0, 1.0)) / kDeg);
+    for (std::size_t j = i + 1; j < base_T_mount.size(); ++j) {
+      const Eigen::Isometry3d rel = base_T_mount[i].inverse() * base_T_mount[j];
       const Eigen::AngleAxisd aa(rel.linear());
       const double rot = aa.angle() / kDeg;
-      const double dist = (poses[i].translation() - poses[j].translation()).norm();
+      const double dist = (base_T_mount[i].translation() - base_T_mount[j].translation()).norm();
       s.max_rotation_deg = std::max(s.max_rotation_deg, rot);
       s.max_translation_mm = std::max(s.max_translation_mm, dist);
       if (rot < kSamePoseDeg && rel.translation().norm() < kSamePoseMm) {
@@ -442,7 +442,7 @@ MotionSpread motion_spread(const std::vector<Eigen::Isometry3d>& poses) {
       }
       if (rot >= kAxisMinAngleDeg) {
         axes.push_back(aa.axis());
-        base_axes.push_back(poses[i].linear() * aa.axis());
+        base_axes.push_back(base_T_mount[i].linear() * aa.axis());
       }
     }
   }

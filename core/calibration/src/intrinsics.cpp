@@ -335,6 +335,7 @@ Result<IntrinsicsReport> calibrate_intrinsics(const std::vector<BoardView>& view
 
   // (2) + (3) Robust bundle adjustment, outlier views out, again.
   std::vector<const BoardView*> fitted;
+  fitted.reserve(fit_idx.size());
   for (const std::size_t i : fit_idx) {
     fitted.push_back(&views[i]);
   }
@@ -446,15 +447,15 @@ Result<IntrinsicsReport> calibrate_intrinsics(const std::vector<BoardView>& view
     ceres::Covariance covariance(co);
     std::vector<std::pair<const double*, const double*>> blocks = {{k.data(), k.data()}};
     if (covariance.Compute(blocks, &problem)) {
-      std::array<double, kIntrinsicsSize * kIntrinsicsSize> c{};
+      std::array<double, static_cast<std::size_t>(kIntrinsicsSize) * kIntrinsicsSize> c{};
       covariance.GetCovarianceBlock(k.data(), k.data(), c.data());
       const double dof = static_cast<double>(2 * n) -
                          static_cast<double>(kPoseSize * fitted.size() + kIntrinsicsSize -
                                              fixed.size());
       const double variance = dof > 0 ? sum / dof : 0.0;  // per coordinate
       for (int i = 0; i < 4; ++i) {
-        report.sigma_px[i] = std::sqrt(std::max(0.0, c[static_cast<std::size_t>(i * 10)]) *
-                                       variance);
+        report.sigma_px[i] =
+            std::sqrt(std::max(0.0, c[static_cast<std::size_t>(i) * 10]) * variance);
       }
       if (fit.aspect > 0.0) {
         report.sigma_px[1] = fit.aspect * report.sigma_px[0];

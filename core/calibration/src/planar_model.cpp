@@ -320,27 +320,29 @@ Result<PlanarReport> refine_planar(const PlanarParameters& initial,
   return report;
 }
 
-Result<PlanarParameters> planar_from_pinhole(const CameraCalibration& c,
-                                             const Eigen::Vector2d& ref_px, double link1_mm,
+Result<PlanarParameters> planar_from_pinhole(const CameraCalibration& calibration,
+                                             const Eigen::Vector2d& ref_px,
+                                             double link1_mm,
                                              double link2_mm) {
-  CELL_TRY(c.validate());
-  if (c.model != ModelType::kPinhole || c.mounting != Mounting::kEyeInHand ||
-      c.mount_frame != render::MountFrame::kLink2) {
+  CELL_TRY(calibration.validate());
+  if (calibration.model != ModelType::kPinhole || calibration.mounting != Mounting::kEyeInHand ||
+      calibration.mount_frame != render::MountFrame::kLink2) {
     return Error{Errc::kInvalidArgument,
                  fmt::format("camera '{}': the planar model comes from a pinhole camera on a "
                              "SCARA's link 2",
-                             c.camera_id)};
+                             calibration.camera_id)};
   }
   if (!(link1_mm > 0.0) || !(link2_mm > 0.0)) {
     return Error{Errc::kInvalidArgument, "planar model: link lengths must be > 0"};
   }
-  auto model = c.camera_model();
+  auto model = calibration.camera_model();
   if (!model) {
     return std::move(model).error();
   }
   // Lens-free copy: the planar model has none.
-  auto ideal = render::CameraModel::create(c.width_px, c.height_px, c.pinhole.fx_px,
-                                           c.pinhole.fy_px, c.pinhole.cx_px, c.pinhole.cy_px, {});
+  auto ideal = render::CameraModel::create(
+      calibration.width_px, calibration.height_px, calibration.pinhole.fx_px,
+      calibration.pinhole.fy_px, calibration.pinhole.cx_px, calibration.pinhole.cy_px, {});
   if (!ideal) {
     return std::move(ideal).error();
   }
@@ -348,25 +350,26 @@ Result<PlanarParameters> planar_from_pinhole(const CameraCalibration& c,
   // the flange height with Z = 0, which the 7545's base frame puts at z = 0).
   Eigen::Isometry3d mount = Eigen::Isometry3d::Identity();
   mount.translation() = Eigen::Vector3d(link1_mm + link2_mm, 0.0, 0.0);
-  const Eigen::Isometry3d base_T_cam = mount * c.extrinsics;
-  const double plane = c.working_plane_z_mm;
+  const Eigen::Isometry3d base_T_cam = mount * calibration.extrinsics;
+  const double plane = calibration.working_plane_z_mm;
   auto r = pixel_to_plane(*ideal, base_T_cam, ref_px, plane);
   auto ri = pixel_to_plane(*ideal, base_T_cam, ref_px + Eigen::Vector2d(10.0, 0.0), plane);
-  auto centre = pixel_to_plane(*ideal, base_T_cam, {c.pinhole.cx_px, c.pinhole.cy_px}, plane);
+  auto centre = pixel_to_plane(*ideal, base_T_cam,
+                               {calibration.pinhole.cx_px, calibration.pinhole.cy_px}, plane);
   if (!r || !ri || !centre) {
     return Error{Errc::kInvalidArgument,
-                 fmt::format("camera '{}': the working plane z = {} mm is not in view", c.camera_id,
-                             plane)};
+                 fmt::format("camera '{}': the working plane z = {} mm is not in view",
+                             calibration.camera_id, plane)};
   }
   PlanarParameters p;
   const double height = base_T_cam.translation().z() - plane;
   p.camera_height_mm = height;
-  p.c_x_px_per_mm = c.pinhole.fx_px / height;
-  p.c_y_px_per_mm = c.pinhole.fy_px / height;
+  p.c_x_px_per_mm = calibration.pinhole.fx_px / height;
+  p.c_y_px_per_mm = calibration.pinhole.fy_px / height;
   p.ref_u_px = ref_px.x();
   p.ref_v_px = ref_px.y();
-  p.center_u_px = c.pinhole.cx_px;
-  p.center_v_px = c.pinhole.cy_px;
+  p.center_u_px = calibration.pinhole.cx_px;
+  p.center_v_px = calibration.pinhole.cy_px;
   p.link1_mm = link1_mm;
   p.link2_mm = link2_mm;
   const Eigen::Vector2d e(link1_mm + link2_mm, 0.0);

@@ -153,25 +153,26 @@ Result<CameraCalibration> CalibrationStore::add_camera(CameraCalibration c,
   return c;
 }
 
-Result<BeltCalibration> CalibrationStore::add_belt(BeltCalibration b, const std::string& details) {
-  CELL_TRY(check_id(b.belt_id));
+Result<BeltCalibration> CalibrationStore::add_belt(BeltCalibration calibration,
+                                                   const std::string& details_yaml) {
+  CELL_TRY(check_id(calibration.belt_id));
   std::lock_guard lock(mutex_);
-  auto n = next_number(DeviceKind::kBelt, b.belt_id);
+  auto n = next_number(DeviceKind::kBelt, calibration.belt_id);
   if (!n) {
     return std::move(n).error();
   }
-  if (b.created_utc.empty()) {
-    b.created_utc = utc_seconds(wall_time_ns());
+  if (calibration.created_utc.empty()) {
+    calibration.created_utc = utc_seconds(wall_time_ns());
   }
-  b.version = fmt::format("{}#{}", b.created_utc, *n);
-  CELL_TRY(b.validate());
-  const fs::path dir(device_dir(DeviceKind::kBelt, b.belt_id));
-  if (!details.empty()) {
-    CELL_TRY(write_atomically(dir / fmt::format("{:04d}.details.yaml", *n), details));
+  calibration.version = fmt::format("{}#{}", calibration.created_utc, *n);
+  CELL_TRY(calibration.validate());
+  const fs::path dir(device_dir(DeviceKind::kBelt, calibration.belt_id));
+  if (!details_yaml.empty()) {
+    CELL_TRY(write_atomically(dir / fmt::format("{:04d}.details.yaml", *n), details_yaml));
   }
-  CELL_TRY(write_atomically(dir / file_name(*n), format_belt_calibration(b)));
-  CELL_TRY(write_current(DeviceKind::kBelt, b.belt_id, *n));
-  return b;
+  CELL_TRY(write_atomically(dir / file_name(*n), format_belt_calibration(calibration)));
+  CELL_TRY(write_current(DeviceKind::kBelt, calibration.belt_id, *n));
+  return calibration;
 }
 
 Result<CameraCalibration> CalibrationStore::current_camera(const std::string& id) const {

@@ -181,12 +181,14 @@ TEST(Belt, AWrongSampleIsAnOutlierAndTheRestStand) {
 
 TEST(Belt, ABeltThatDidNotMoveOrNotFarEnoughIsRefused) {
   std::vector<BeltObservation> still;
+  still.reserve(4);
   for (int i = 0; i < 4; ++i) {
     still.push_back({fmt::format("s{}", i), "p", 1000, 0, Eigen::Vector3d(350.0, 100.0 + 0.01 * i, -199.0)});
   }
   EXPECT_THAT(calibrate_belt(still, "belt1", "scara_picker"),
               IsErrWith(Errc::kInvalidArgument, "did not move"));
   std::vector<BeltObservation> short_travel;
+  short_travel.reserve(4);
   for (int i = 0; i < 4; ++i) {
     short_travel.push_back({fmt::format("s{}", i), "p", 1000 + 100 * i, 0,
                             Eigen::Vector3d(350.0, 100.0 - 3.835 * i, -199.0)});

@@ -317,9 +317,13 @@ Eigen::Isometry3d noisy_pose(const Eigen::Isometry3d& pose_in, double rotation_s
   return pose_in * delta;
 }
 
-HandEyeScenario excalibur_eye_in_hand(int count, double rot_sigma, double trans_sigma,
-                                      double pixel_sigma, std::uint64_t seed, double el_lo,
-                                      double el_hi) {
+HandEyeScenario excalibur_eye_in_hand(int count,
+                                      double rotation_sigma_deg,
+                                      double translation_sigma_mm,
+                                      double pixel_sigma_px,
+                                      std::uint64_t seed,
+                                      double min_elevation_deg,
+                                      double max_elevation_deg) {
   HandEyeScenario s;
   s.name = "excalibur eye-in-hand";
   s.camera = synthetic_camera();
@@ -335,7 +339,8 @@ HandEyeScenario excalibur_eye_in_hand(int count, double rot_sigma, double trans_
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   for (int attempt = 0; attempt < 4000 && static_cast<int>(s.samples.size()) < count; ++attempt) {
     const double dist = 230.0 + 100.0 * unit(rng);
-    const double el = (el_lo + (el_hi - el_lo) * unit(rng)) * kDegree;
+    const double el =
+        (min_elevation_deg + (max_elevation_deg - min_elevation_deg) * unit(rng)) * kDegree;
     const double az = (-180.0 + 360.0 * unit(rng)) * kDegree;
     const Eigen::Vector3d eye =
         centre + dist * Eigen::Vector3d(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az),
@@ -354,18 +359,22 @@ HandEyeScenario excalibur_eye_in_hand(int count, double rot_sigma, double trans_
     if (!board_in_view(s.camera, world_T_camera.inverse() * s.truth_target, s.board, 10.0)) {
       continue;
     }
-    auto obs = observe(s.camera, s.board, s.truth_target, world_T_camera, 0.0, 0.3, pixel_sigma,
+    auto obs = observe(s.camera, s.board, s.truth_target, world_T_camera, 0.0, 0.3, pixel_sigma_px,
                        seed + static_cast<std::uint64_t>(attempt), rng);
     if (obs) {
-      add_sample(s, mount, *picked, std::move(*obs), rot_sigma, trans_sigma, false, rng);
+      add_sample(s, mount, *picked, std::move(*obs), rotation_sigma_deg, translation_sigma_mm,
+                 false, rng);
     }
   }
   EXPECT_EQ(static_cast<int>(s.samples.size()), count) << s.name;
   return s;
 }
 
-HandEyeScenario ibm7545_eye_in_hand(int count, double rot_sigma, double trans_sigma,
-                                    double pixel_sigma, std::uint64_t seed) {
+HandEyeScenario ibm7545_eye_in_hand(int count,
+                                    double rotation_sigma_deg,
+                                    double translation_sigma_mm,
+                                    double pixel_sigma_px,
+                                    std::uint64_t seed) {
   HandEyeScenario s;
   s.name = "7545 eye-in-hand (link 2)";
   const render::CameraDescription camera = camera_file("ibm7545_eye.yaml");
@@ -404,17 +413,21 @@ HandEyeScenario ibm7545_eye_in_hand(int count, double rot_sigma, double trans_si
       continue;
     }
     auto obs = observe(s.camera, s.board, world_T_board, world_T_camera, table_z, 0.9,
-                       pixel_sigma, seed + static_cast<std::uint64_t>(attempt), rng);
+                       pixel_sigma_px, seed + static_cast<std::uint64_t>(attempt), rng);
     if (obs) {
-      add_sample(s, *mount, q, std::move(*obs), rot_sigma, trans_sigma, true, rng);
+      add_sample(s, *mount, q, std::move(*obs), rotation_sigma_deg, translation_sigma_mm, true,
+                 rng);
     }
   }
   EXPECT_EQ(static_cast<int>(s.samples.size()), count) << s.name;
   return s;
 }
 
-HandEyeScenario picker_eye_to_hand(int count, double rot_sigma, double trans_sigma,
-                                   double pixel_sigma, std::uint64_t seed) {
+HandEyeScenario picker_eye_to_hand(int count,
+                                   double rotation_sigma_deg,
+                                   double translation_sigma_mm,
+                                   double pixel_sigma_px,
+                                   std::uint64_t seed) {
   HandEyeScenario s;
   s.name = "belt camera over the picker (eye-to-hand)";
   const render::CameraDescription camera = camera_file("belt_cam.yaml");
@@ -448,17 +461,21 @@ HandEyeScenario picker_eye_to_hand(int count, double rot_sigma, double trans_sig
       continue;
     }
     auto obs = observe(s.camera, s.board, world_T_board, camera.truth.pose, 760.0, 0.3,
-                       pixel_sigma, seed + static_cast<std::uint64_t>(attempt), rng);
+                       pixel_sigma_px, seed + static_cast<std::uint64_t>(attempt), rng);
     if (obs) {
-      add_sample(s, mount, *picked, std::move(*obs), rot_sigma, trans_sigma, true, rng);
+      add_sample(s, mount, *picked, std::move(*obs), rotation_sigma_deg, translation_sigma_mm, true,
+                 rng);
     }
   }
   EXPECT_EQ(static_cast<int>(s.samples.size()), count) << s.name;
   return s;
 }
 
-HandEyeScenario excalibur_eye_to_hand(int count, double rot_sigma, double trans_sigma,
-                                      double pixel_sigma, std::uint64_t seed) {
+HandEyeScenario excalibur_eye_to_hand(int count,
+                                      double rotation_sigma_deg,
+                                      double translation_sigma_mm,
+                                      double pixel_sigma_px,
+                                      std::uint64_t seed) {
   HandEyeScenario s;
   s.name = "fixed camera over the excalibur (eye-to-hand)";
   s.camera = synthetic_camera();
@@ -496,9 +513,10 @@ HandEyeScenario excalibur_eye_to_hand(int count, double rot_sigma, double trans_
       continue;
     }
     auto obs = observe(s.camera, s.board, mount * s.truth_target, s.truth_extrinsics, -200.0, 0.4,
-                       pixel_sigma, seed + static_cast<std::uint64_t>(attempt), rng);
+                       pixel_sigma_px, seed + static_cast<std::uint64_t>(attempt), rng);
     if (obs) {
-      add_sample(s, mount, *picked, std::move(*obs), rot_sigma, trans_sigma, false, rng);
+      add_sample(s, mount, *picked, std::move(*obs), rotation_sigma_deg, translation_sigma_mm,
+                 false, rng);
     }
   }
   EXPECT_EQ(static_cast<int>(s.samples.size()), count) << s.name;

@@ -56,9 +56,12 @@ std::vector<cv::Mat> intrinsics_images(const render::CameraDescription& camera,
 /// the camera's TRUE model, detected, and `corner_noise_px` added. Fails the test when a view
 /// is not detected.
 std::vector<BoardView> intrinsics_views(const render::CameraDescription& camera,
-                                        const BoardSpec& spec, int count, double depth_mm,
-                                        double corner_noise_px, std::uint64_t seed,
-                                        std::vector<Eigen::Isometry3d>* camera_T_board = nullptr);
+                                        const BoardSpec& spec,
+                                        int count,
+                                        double depth_mm,
+                                        double corner_noise_px,
+                                        std::uint64_t seed,
+                                        std::vector<Eigen::Isometry3d>* truth_poses = nullptr);
 
 /// A hand-eye data set rendered through a true camera, with the truth it came from.
 struct HandEyeScenario {

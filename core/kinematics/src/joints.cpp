@@ -206,7 +206,7 @@ Error no_branch_within_limits(std::span<const JointSpec> joints,
                               std::string_view what) {
   std::string message = fmt::format("{}: no IK branch is within the joint limits", what);
   for (const IkSolution& s : solutions) {
-    const auto bad = static_cast<std::size_t>(s.violated_joint);
+    const auto bad = static_cast<std::size_t>(static_cast<std::uint8_t>(s.violated_joint));
     message += fmt::format("; {}: {}", s.branch,
                            limit_message(joints[bad], s.q(static_cast<Eigen::Index>(bad))));
   }
@@ -228,7 +228,7 @@ Result<JointVector> pick_branch(std::span<const JointSpec> joints,
                  fmt::format("unknown IK branch '{}'; valid branches: {}", name, valid)};
   }
   if (!s->within_limits()) {
-    const auto bad = static_cast<std::size_t>(s->violated_joint);
+    const auto bad = static_cast<std::size_t>(static_cast<std::uint8_t>(s->violated_joint));
     return Error{Errc::kOutOfRange,
                  fmt::format("branch {}: {}", s->branch,
                              limit_message(joints[bad], s->q(static_cast<Eigen::Index>(bad))))};

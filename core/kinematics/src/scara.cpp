@@ -78,7 +78,7 @@ Status solve(const ScaraModel& model,
 
   const std::uint8_t first = only == 1 ? 1 : 0;
   const std::uint8_t last = only == 0 ? 0 : 1;
-  out.resize(static_cast<std::size_t>(last - first + 1));
+  out.resize(static_cast<std::size_t>(last) - static_cast<std::size_t>(first) + 1);
   for (std::uint8_t b = first; b <= last; ++b) {
     const bool positive = b == 0;
     double j1 = 0.0;

@@ -1,17 +1,16 @@
 #include "cell/process/child.hpp"
 
 #include <fcntl.h>
+#include <fmt/format.h>
 #include <poll.h>
-#include <signal.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <csignal>
 #include <cstring>
 #include <thread>
-
-#include <fmt/format.h>
 
 extern char** environ;
 
@@ -58,7 +57,7 @@ std::string which(const std::string& name) {
   while (!rest.empty()) {
     const auto colon = rest.find(':');
     const std::string dir(rest.substr(0, colon));
-    const std::string candidate = (dir.empty() ? std::string(".") : dir) + "/" + name;
+    std::string candidate = (dir.empty() ? std::string(".") : dir) + "/" + name;
     if (access(candidate.c_str(), X_OK) == 0) {
       return candidate;
     }
@@ -79,6 +78,7 @@ Result<Child> Child::spawn(const SpawnOptions& options) {
   argv_store.push_back(exe);
   argv_store.insert(argv_store.end(), options.args.begin(), options.args.end());
   std::vector<char*> argv;
+  argv.reserve(argv_store.size() + 1);
   for (auto& a : argv_store) {
     argv.push_back(a.data());
   }
@@ -113,6 +113,7 @@ Result<Child> Child::spawn(const SpawnOptions& options) {
     }
   }
   std::vector<char*> envp;
+  envp.reserve(env_store.size() + 1);
   for (auto& e : env_store) {
     envp.push_back(e.data());
   }
@@ -220,7 +221,7 @@ Child::Child(Child&& other) noexcept
     : pid_(std::exchange(other.pid_, -1)),
       output_fd_(std::exchange(other.output_fd_, -1)),
       group_leader_(other.group_leader_),
-      exit_(std::move(other.exit_)),
+      exit_(other.exit_),
       output_(std::move(other.output_)) {}
 
 Child& Child::operator=(Child&& other) noexcept {
@@ -232,7 +233,7 @@ Child& Child::operator=(Child&& other) noexcept {
     pid_ = std::exchange(other.pid_, -1);
     output_fd_ = std::exchange(other.output_fd_, -1);
     group_leader_ = other.group_leader_;
-    exit_ = std::move(other.exit_);
+    exit_ = other.exit_;
     output_ = std::move(other.output_);
   }
   return *this;

@@ -1,15 +1,14 @@
 #include "cell/process/child.hpp"
 
-#include <signal.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 
+#include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <iterator>
 #include <optional>
 #include <thread>
-
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
 
 #include "cell/testing/matchers.hpp"
 

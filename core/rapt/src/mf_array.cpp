@@ -36,16 +36,18 @@ MfEntry MfEntry::triple_of(int body, int situation, int via_body) {
 MfArray::MfArray(int bodies, int situations)
     : bodies_(bodies),
       situations_(situations),
-      entries_(static_cast<std::size_t>(bodies * situations)) {}
+      entries_(static_cast<std::size_t>(bodies) * static_cast<std::size_t>(situations)) {}
 
 MfEntry& MfArray::at(int body, int situation) {
   CELL_CHECK(body >= 1 && body <= bodies_ && situation >= 1 && situation <= situations_);
-  return entries_[static_cast<std::size_t>((body - 1) * situations_ + (situation - 1))];
+  return entries_[static_cast<std::size_t>(body - 1) * static_cast<std::size_t>(situations_) +
+                  static_cast<std::size_t>(situation - 1)];
 }
 
 const MfEntry& MfArray::at(int body, int situation) const {
   CELL_CHECK(body >= 1 && body <= bodies_ && situation >= 1 && situation <= situations_);
-  return entries_[static_cast<std::size_t>((body - 1) * situations_ + (situation - 1))];
+  return entries_[static_cast<std::size_t>(body - 1) * static_cast<std::size_t>(situations_) +
+                  static_cast<std::size_t>(situation - 1)];
 }
 
 namespace {

@@ -16,7 +16,8 @@ const std::optional<Pose>& NominalSolution::pose(int body, int situation) const 
   if (body < 1 || body > bodies || situation < 1 || situation > situations) {
     return kNone;
   }
-  return poses[static_cast<std::size_t>((body - 1) * situations + (situation - 1))];
+  return poses[static_cast<std::size_t>(body - 1) * static_cast<std::size_t>(situations) +
+               static_cast<std::size_t>(situation - 1)];
 }
 
 bool NominalSolution::complete() const {
@@ -64,7 +65,7 @@ class Engine {
  public:
   Engine(const Program& program, Diagnostics& diags, const NominalOptions& options)
       : p_(program), d_(diags), o_(options), s_(program.situation_count()) {
-    const std::size_t n = static_cast<std::size_t>(p_.body_count() * s_);
+    const std::size_t n = static_cast<std::size_t>(p_.body_count()) * static_cast<std::size_t>(s_);
     parent_.resize(n);
     parent_T_.assign(n, Pose::Identity());
     for (std::size_t i = 0; i < n; ++i) {
@@ -490,6 +491,7 @@ class Engine {
       return std::tie(x.line, x.column) < std::tie(y.line, y.column);
     });
     std::vector<std::pair<std::uint32_t, std::uint32_t>> key;
+    key.reserve(unique.size());
     for (const SourceLoc& l : unique) {
       key.emplace_back(l.line, l.column);
     }

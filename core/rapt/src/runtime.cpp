@@ -13,11 +13,13 @@
 namespace cell::rapt {
 
 const Pose& RunResult::fm_of(int body, int situation) const {
-  return fm.at(static_cast<std::size_t>((body - 1) * situations + (situation - 1)));
+  return fm.at(static_cast<std::size_t>(body - 1) * static_cast<std::size_t>(situations) +
+               static_cast<std::size_t>(situation - 1));
 }
 
 const Pose& RunResult::actual_pose(int body, int situation) const {
-  return actual.at(static_cast<std::size_t>((body - 1) * situations + (situation - 1)));
+  return actual.at(static_cast<std::size_t>(body - 1) * static_cast<std::size_t>(situations) +
+                   static_cast<std::size_t>(situation - 1));
 }
 
 namespace {
@@ -30,11 +32,12 @@ class Resolver {
       : cp_(cp),
         packages_(packages),
         s_(cp.program.situation_count()),
-        fm_(static_cast<std::size_t>(cp.program.body_count() * s_)),
+        fm_(static_cast<std::size_t>(cp.program.body_count()) * static_cast<std::size_t>(s_)),
         state_(fm_.size(), 0) {}
 
   Result<Pose> fm(int body, int situation) {
-    const auto i = static_cast<std::size_t>((body - 1) * s_ + (situation - 1));
+    const auto i = static_cast<std::size_t>(body - 1) * static_cast<std::size_t>(s_) +
+                   static_cast<std::size_t>(situation - 1);
     if (state_[i] == 2) {
       return fm_[i];
     }
@@ -269,11 +272,12 @@ Result<RunResult> run(const CompiledProgram& cp,
       }
     }
   }
-  out.fm.resize(static_cast<std::size_t>(out.bodies * out.situations));
+  out.fm.resize(static_cast<std::size_t>(out.bodies) * static_cast<std::size_t>(out.situations));
   out.actual.resize(out.fm.size());
   for (int b = 1; b <= out.bodies; ++b) {
     for (int s = 1; s <= out.situations; ++s) {
-      const auto i = static_cast<std::size_t>((b - 1) * out.situations + (s - 1));
+      const auto i = static_cast<std::size_t>(b - 1) * static_cast<std::size_t>(out.situations) +
+                     static_cast<std::size_t>(s - 1);
       out.fm[i] = s <= last ? *resolver.fm(b, s) : Pose::Identity();
       out.actual[i] = cp.nominal_pose(b, s) * out.fm[i];
     }

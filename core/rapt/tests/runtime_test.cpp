@@ -98,10 +98,10 @@ TEST(RunAppendixV, ActionsDecomposeAsTheThesisSays) {
   const RunResult& r = appendix_v_run();
   ASSERT_FALSE(r.actions.empty());
   for (const ActionOutcome& a : r.actions) {
-    const Pose pv0 = r.actual_pose(a.body, a.situation - 1);
-    const Pose pv1 = r.actual_pose(a.body, a.situation);
-    const Pose pn0 = cp.nominal_pose(a.body, a.situation - 1);
-    const Pose pn1 = cp.nominal_pose(a.body, a.situation);
+    const Pose& pv0 = r.actual_pose(a.body, a.situation - 1);
+    const Pose& pv1 = r.actual_pose(a.body, a.situation);
+    const Pose& pn0 = cp.nominal_pose(a.body, a.situation - 1);
+    const Pose& pn1 = cp.nominal_pose(a.body, a.situation);
     EXPECT_THAT(a.actual * pv0, IsNearPose(pv1, 1e-9));                 // (7.13) one step
     EXPECT_THAT(a.nominal * pn0, IsNearPose(pn1, 1e-9));                // (7.12)
     EXPECT_THAT(a.nominal * a.correction, IsNearPose(a.actual, 1e-9));  // (7.14) TA = TC ** TN

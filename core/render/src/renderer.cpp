@@ -103,7 +103,8 @@ Result<Renderer> Renderer::create(const CameraModel& camera, const Lighting& lig
   const int h = camera.height_px();
   impl->grid_cols = (w - 1) / kGridStep + 2;
   impl->grid_rows = (h - 1) / kGridStep + 2;
-  impl->grid_rays.reserve(static_cast<std::size_t>(impl->grid_cols * impl->grid_rows));
+  impl->grid_rays.reserve(static_cast<std::size_t>(impl->grid_cols) *
+                          static_cast<std::size_t>(impl->grid_rows));
   for (int l = 0; l < impl->grid_rows; ++l) {
     for (int k = 0; k < impl->grid_cols; ++k) {
       const Eigen::Vector2d px(std::min(k * kGridStep, w - 1), std::min(l * kGridStep, h - 1));
@@ -161,7 +162,7 @@ void Renderer::Impl::fill_background(const Scene& scene, const Eigen::Isometry3d
       }
       const int u1 = std::min(u0 + kGridStep, w);
       const float a = column_values[static_cast<std::size_t>(k)];
-      const float step = (column_values[static_cast<std::size_t>(k + 1)] - a) * kInvStep;
+      const float step = (column_values[static_cast<std::size_t>(k) + 1] - a) * kInvStep;
       for (int u = u0; u < u1; ++u) {
         row[u] = a + step * static_cast<float>(u - u0);
       }

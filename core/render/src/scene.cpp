@@ -153,7 +153,8 @@ std::vector<Eigen::Vector3d> chessboard_corners(const Chessboard& board) {
   if (board.squares_x < 2 || board.squares_y < 2) {
     return corners;
   }
-  corners.reserve(static_cast<std::size_t>((board.squares_x - 1) * (board.squares_y - 1)));
+  corners.reserve(static_cast<std::size_t>(board.squares_x - 1) *
+                  static_cast<std::size_t>(board.squares_y - 1));
   for (int j = 1; j < board.squares_y; ++j) {
     for (int i = 1; i < board.squares_x; ++i) {
       corners.emplace_back(i * board.square_mm, j * board.square_mm, 0.0);

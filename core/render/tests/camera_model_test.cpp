@@ -31,6 +31,7 @@ TEST(CameraModel, ProjectionMatchesCvProjectPoints) {
   std::uniform_real_distribution<double> xy(-90.0, 90.0);
   std::uniform_real_distribution<double> z(300.0, 600.0);
   std::vector<cv::Point3d> object;
+  object.reserve(200);
   for (int i = 0; i < 200; ++i) {
     object.emplace_back(xy(rng), xy(rng), z(rng));
   }

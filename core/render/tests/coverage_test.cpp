@@ -67,8 +67,9 @@ TEST(Coverage, EveryPixelHoldsTheExactAreaOfASlantedPolygon) {
   for (int j = 0; j < 14; ++j) {
     for (int i = 0; i < 16; ++i) {
       const float expected = static_cast<float>(pixel_area(poly, i, j));
-      EXPECT_NEAR(img[static_cast<std::size_t>(j * 16 + i)], expected, kTol) << i << "," << j;
-      total += img[static_cast<std::size_t>(j * 16 + i)];
+      const std::size_t index = static_cast<std::size_t>(j) * 16 + static_cast<std::size_t>(i);
+      EXPECT_NEAR(img[index], expected, kTol) << i << "," << j;
+      total += img[index];
     }
   }
   double area2 = 0.0;
@@ -113,7 +114,7 @@ TEST(Coverage, PolygonsReachingOutsideTheCanvasAreClipped) {
   acc.reset(-5, 0, 20, 6);  // the window starts left of the canvas
   const std::vector<RasterPoint> poly = {{-4.5, 0.0}, {3.5, 0.0}, {3.5, 4.0}, {-4.5, 4.0}};
   acc.add_ring(poly.data(), 4, 1.0F, 1.0F);
-  std::vector<float> canvas(8 * 6, 0.0F);
+  std::vector<float> canvas(std::size_t{8} * 6, 0.0F);
   acc.composite_over(canvas.data(), 8, 6);
   EXPECT_NEAR(canvas[0], 1.0F, 1e-6F);
   EXPECT_NEAR(canvas[3], 0.5F, 1e-6F);

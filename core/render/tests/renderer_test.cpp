@@ -177,9 +177,10 @@ TEST(Renderer, SameSceneSeedAndCameraGiveTheSameBytes) {
   const CameraModel camera = with_lens();
   Scene scene = empty_scene(true, true);
   for (int i = 0; i < 15; ++i) {
-    scene.parts.push_back(
-        dip(fmt::format("ic{}", i), part_pose(-55.0 + 22.0 * (i % 6), -45.0 + 40.0 * (i / 6), 0.0,
-                                              0.3 * i)));
+    const int column = i % 6;
+    const int row = i / 6;  // rows of 6
+    scene.parts.push_back(dip(fmt::format("ic{}", i),
+                              part_pose(-55.0 + 22.0 * column, -45.0 + 40.0 * row, 0.0, 0.3 * i)));
   }
   const Eigen::Isometry3d world_T_camera = looking_down({0.0, 0.0, 420.0}, 0.7);
   RenderOptions options;

@@ -93,13 +93,26 @@ Context::~Context() { shutdown_.remove(stop_callback_); }
 
 namespace detail {
 
-int report_exception(const std::exception& e, bool bus_error) {
-  if (bus_error) {
-    log::error("bus", e.what(),
-               {{"hint", "check CYCLONEDDS_URI and the domain id; is the network interface up?"}});
-    return kExitBus;
+int report_exception(const std::exception& e, bool bus_error) noexcept {
+  try {
+    if (bus_error) {
+      log::error("bus", e.what(),
+                 {{"hint", "check CYCLONEDDS_URI and the domain id; is the network interface up?"}});
+    } else {
+      log::error("fatal", e.what());
+    }
+  } catch (...) {  // the log itself failed (out of memory): the exit code still says it
+    (void)std::fputs(e.what(), stderr);
   }
-  log::error("fatal", e.what());
+  return bus_error ? kExitBus : kExitFailure;
+}
+
+int report_unknown_exception() noexcept {
+  try {
+    log::error("fatal", "an exception not derived from std::exception");
+  } catch (...) {
+    (void)std::fputs("fatal: an exception not derived from std::exception\n", stderr);
+  }
   return kExitFailure;
 }
 

@@ -1,8 +1,8 @@
 #include "cell/service/shutdown.hpp"
 
-#include <signal.h>
 #include <unistd.h>
 
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 

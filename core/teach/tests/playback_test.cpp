@@ -30,7 +30,8 @@ Task task3() {
   Task task;
   task.name = "t";
   task.robot_id = "ibm7545";
-  auto pose = [](const char* name, kinematics::JointVector q, MoveKind move = MoveKind::kJoint) {
+  auto pose = [](const char* name, const kinematics::JointVector& q,
+                 MoveKind move = MoveKind::kJoint) {
     PoseStep p;
     p.name = name;
     p.joints = q;

@@ -216,7 +216,7 @@ Result<EdgeMeasurement> find_edge(const cv::Mat& image,
       for (int s = 0; s <= steps_s; ++s) {
         const int wgt = profile[static_cast<std::size_t>(s)];
         const int left = s > 0 ? profile[static_cast<std::size_t>(s - 1)] : -1;
-        const int right = s < steps_s ? profile[static_cast<std::size_t>(s + 1)] : -1;
+        const int right = s < steps_s ? profile[static_cast<std::size_t>(s) + 1] : -1;
         if (wgt >= threshold && wgt >= left && wgt > right) {
           out.push_back(window.p1 + t * u + s * n);
         }
@@ -264,9 +264,9 @@ Result<EdgeMeasurement> find_edge(const cv::Mat& image,
     if (!inside(q + half * m) || !inside(q - half * m)) {
       continue;
     }
-    for (int j = -half; j <= half; ++j) {
-      const Eigen::Vector2d p = q + j * m;
-      profile[static_cast<std::size_t>(j + half)] = bilinear(image, p.x(), p.y());
+    for (int i = 0; i <= 2 * half; ++i) {  // across, from -half to +half
+      const Eigen::Vector2d p = q + (i - half) * m;
+      profile[static_cast<std::size_t>(i)] = bilinear(image, p.x(), p.y());
     }
     const double lo_end = 0.5 * (profile[0] + profile[1]);
     const double hi_end = 0.5 * (profile[profile.size() - 1] + profile[profile.size() - 2]);
@@ -322,7 +322,7 @@ Result<EdgeMeasurement> find_edge(const cv::Mat& image,
   const Eigen::Vector2d dir = perp(line->n);
   auto on_line = [&](double t) {
     const Eigen::Vector2d p = window.p1 + t * u;
-    const Eigen::Vector2d foot = p - line->distance(p) * line->n;
+    Eigen::Vector2d foot = p - line->distance(p) * line->n;
     return foot;
   };
   (void)dir;

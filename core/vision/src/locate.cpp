@@ -474,7 +474,7 @@ void Locator::Impl::collect_samples(const Run* runs, int count, double dark, int
     return true;
   };
   // Runs of each row of the blob (they come in raster order).
-  row_first.assign(static_cast<std::size_t>(y_max - y_min + 2), 0);
+  row_first.assign(static_cast<std::size_t>(y_max - y_min) + 2, 0);
   for (int i = 0, y = y_min; i <= count; ++i) {
     const int ry = i < count ? runs[i].y : y_max + 1;
     while (y <= ry && y <= y_max + 1) {
@@ -488,7 +488,7 @@ void Locator::Impl::collect_samples(const Run* runs, int count, double dark, int
       return;
     }
     begin = row_first[static_cast<std::size_t>(y - y_min)];
-    end = row_first[static_cast<std::size_t>(y - y_min + 1)];
+    end = row_first[static_cast<std::size_t>(y - y_min) + 1];
   };
   auto column_crossing = [&](int x, int y, int sign) {
     // sign -1: bright above (a top crossing), window rows y - w .. y + w - 1, outermost y - w.
@@ -1130,9 +1130,7 @@ std::optional<Fit> Locator::Impl::fit_region(Region& region) {
       if (shape == order.front()) {
         break;  // the expected model explains the blob: no need to try the others
       }
-    } else if (!best) {
-      best = fit;
-    } else if (!explained(*best) && fit->rms_px < best->rms_px) {
+    } else if (!best || (!explained(*best) && fit->rms_px < best->rms_px)) {
       best = fit;
     }
   }
@@ -1439,7 +1437,7 @@ void Locator::Impl::process_blob(const Blob& blob, LocateResult& result, std::ve
   Region whole;
   whole.area_px = blob.area;
   Eigen::Vector2d sum = Eigen::Vector2d::Zero();
-  whole.outline.reserve(static_cast<std::size_t>(2 * blob.run_count));
+  whole.outline.reserve(2 * static_cast<std::size_t>(blob.run_count));
   for (int i = 0; i < blob.run_count; ++i) {
     const Run& r = runs[i];
     whole.outline.emplace_back(static_cast<float>(r.x0 - 0.5), static_cast<float>(r.y));

@@ -62,7 +62,8 @@ Result<PixelMapper> PixelMapper::create(const calibration::CameraCalibration& ca
       grid->v0 = -Grid::kMargin;
       grid->cols = (m.width_px_ + 2 * Grid::kMargin) / Grid::kStep + 2;
       grid->rows = (m.height_px_ + 2 * Grid::kMargin) / Grid::kStep + 2;
-      grid->ideal.resize(static_cast<std::size_t>(grid->cols * grid->rows));
+      grid->ideal.resize(static_cast<std::size_t>(grid->cols) *
+                         static_cast<std::size_t>(grid->rows));
       grid->valid.resize(grid->ideal.size());
       const double fx = m.camera_.fx_px();
       const double fy = m.camera_.fy_px();
@@ -72,7 +73,8 @@ Result<PixelMapper> PixelMapper::create(const calibration::CameraCalibration& ca
           const Eigen::Vector2d distorted((px.x() - m.camera_.cx_px()) / fx,
                                           (px.y() - m.camera_.cy_px()) / fy);
           const auto ideal = m.camera_.undistort(distorted);
-          const auto i = static_cast<std::size_t>(r * grid->cols + c);
+          const auto i = static_cast<std::size_t>(r) * static_cast<std::size_t>(grid->cols) +
+                         static_cast<std::size_t>(c);
           grid->valid[i] = ideal ? 1 : 0;
           grid->ideal[i] = ideal ? *ideal : Eigen::Vector2d::Zero();
         }
@@ -201,7 +203,7 @@ Status PixelMapper::bind(const kinematics::RobotModel* robot, std::span<const do
 Result<Eigen::Vector2d> PixelMapper::undistort_normalised(const Eigen::Vector2d& px) const {
   const double fx = camera_.fx_px();
   const double fy = camera_.fy_px();
-  const Eigen::Vector2d distorted((px.x() - camera_.cx_px()) / fx, (px.y() - camera_.cy_px()) / fy);
+  Eigen::Vector2d distorted((px.x() - camera_.cx_px()) / fx, (px.y() - camera_.cy_px()) / fy);
   if (!grid_) {
     return distorted;  // no lens model: ideal = distorted
   }
@@ -213,7 +215,10 @@ Result<Eigen::Vector2d> PixelMapper::undistort_normalised(const Eigen::Vector2d&
   if (c0 < 0 || r0 < 0 || c0 + 1 >= g.cols || r0 + 1 >= g.rows) {
     return camera_.undistort(distorted);  // beyond the grid: Newton
   }
-  const auto at = [&](int r, int c) { return static_cast<std::size_t>(r * g.cols + c); };
+  const auto at = [&](int r, int c) {
+    return static_cast<std::size_t>(r) * static_cast<std::size_t>(g.cols) +
+           static_cast<std::size_t>(c);
+  };
   const std::size_t i00 = at(r0, c0);
   const std::size_t i01 = at(r0, c0 + 1);
   const std::size_t i10 = at(r0 + 1, c0);

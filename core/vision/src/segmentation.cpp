@@ -42,7 +42,7 @@ void Segmenter::estimate_background(const cv::Mat& image, const SegmentationOpti
   shift_ = std::countr_zero(static_cast<unsigned>(block_));
   blocks_x_ = (width_ + block_ - 1) / block_;
   blocks_y_ = (height_ + block_ - 1) / block_;
-  const std::size_t n = static_cast<std::size_t>(blocks_x_ * blocks_y_);
+  const std::size_t n = static_cast<std::size_t>(blocks_x_) * static_cast<std::size_t>(blocks_y_);
   raw_levels_.assign(n, 0.0F);
   levels_.assign(n, 0.0F);
   thresholds_.assign(n, options.fixed_threshold);
@@ -73,7 +73,7 @@ void Segmenter::estimate_background(const cv::Mat& image, const SegmentationOpti
           t = hi;
         }
       }
-      raw_levels_[static_cast<std::size_t>(by * blocks_x_ + bx)] = static_cast<float>(top[4]);
+      raw_levels_[block_index(bx, by)] = static_cast<float>(top[4]);
     }
   }
   for (int by = 0; by < blocks_y_; ++by) {
@@ -84,11 +84,11 @@ void Segmenter::estimate_background(const cv::Mat& image, const SegmentationOpti
           const int x = bx + dx;
           const int y = by + dy;
           if (x >= 0 && y >= 0 && x < blocks_x_ && y < blocks_y_) {
-            m = std::max(m, raw_levels_[static_cast<std::size_t>(y * blocks_x_ + x)]);
+            m = std::max(m, raw_levels_[block_index(x, y)]);
           }
         }
       }
-      const std::size_t i = static_cast<std::size_t>(by * blocks_x_ + bx);
+      const std::size_t i = block_index(bx, by);
       levels_[i] = m;
       if (options.mode == ThresholdMode::kAdaptive) {
         thresholds_[i] =
@@ -108,9 +108,7 @@ double Segmenter::background(double x, double y) const noexcept {
   const int y1 = std::min(y0 + 1, blocks_y_ - 1);
   const double tx = gx - x0;
   const double ty = gy - y0;
-  auto at = [&](int bx, int by) {
-    return static_cast<double>(levels_[static_cast<std::size_t>(by * blocks_x_ + bx)]);
-  };
+  auto at = [&](int bx, int by) { return static_cast<double>(levels_[block_index(bx, by)]); };
   return (1 - ty) * ((1 - tx) * at(x0, y0) + tx * at(x1, y0)) +
          ty * ((1 - tx) * at(x0, y1) + tx * at(x1, y1));
 }
@@ -135,7 +133,7 @@ void Segmenter::segment(const cv::Mat& image, const SegmentationOptions& options
   for (int y = 0; y < height_; ++y) {
     const std::uint8_t* row = image.ptr<std::uint8_t>(y);
     const int cur_begin = static_cast<int>(scratch_runs_.size());
-    const int* thr_row = &thresholds_[static_cast<std::size_t>((y >> shift_) * blocks_x_)];
+    const int* thr_row = &thresholds_[block_index(0, y >> shift_)];
 #if defined(__SSE2__)
     if ((y >> shift_) != vector_row) {  // the biased thresholds of this row of blocks
       vector_row = y >> shift_;

@@ -41,7 +41,7 @@ class Segmenter {
   double background(double x, double y) const noexcept;
   /// The dark threshold of the block holding pixel (x, y): dark is grey < threshold.
   int threshold(int x, int y) const noexcept {
-    return thresholds_[static_cast<std::size_t>((y >> shift_) * blocks_x_ + (x >> shift_))];
+    return thresholds_[block_index(x >> shift_, y >> shift_)];
   }
 
   const std::vector<Run>& runs() const noexcept { return runs_; }
@@ -50,6 +50,11 @@ class Segmenter {
 
  private:
   void estimate_background(const cv::Mat& image, const SegmentationOptions& options);
+  /// Index of block (bx, by) in the per-block tables (row by row, blocks_x_ to a row).
+  std::size_t block_index(int bx, int by) const noexcept {
+    return static_cast<std::size_t>(by) * static_cast<std::size_t>(blocks_x_) +
+           static_cast<std::size_t>(bx);
+  }
 
   int width_ = 0;
   int height_ = 0;

@@ -391,6 +391,7 @@ TEST(ThesisPipelineAccuracy, TheCodesShortLookBackOverflowsOnLongRowsAsTheThesis
   const Cell& cell = Cell::get();
   const Eigen::Vector2d c = cell.window(25.0).center();
   std::vector<render::Part> parts;
+  parts.reserve(3);
   for (int k = 0; k < 3; ++k) {
     parts.push_back(cell.part(fmt::format("ic{}", k), "ic_7x30", c.x() - 40 + 40 * k, c.y(), 0.02,
                               false));  // long sides along the rows

@@ -92,7 +92,7 @@ TEST(BeltVision, EveryDipOnTheDarkBeltIsNamedAndLocated) {
     render::RenderOptions ro;
     ro.exposure_s = b.camera.exposure_s;
     ro.noise_sigma = 2.0;
-    ro.seed = static_cast<std::uint64_t>(100 + i);
+    ro.seed = 100 + static_cast<std::uint64_t>(i);
     cv::Mat image;
     ASSERT_TRUE(renderer->render(scene, world_T_camera, ro, image));
     auto found = locator->locate(image, *mapper);

@@ -28,7 +28,7 @@ std::vector<std::uint8_t> ramp(std::size_t n) {
 }
 
 TEST(ImageFromRaw, CopiesMonoRowsWithTheirStep) {
-  const auto data = ramp(4 * 10);  // 3 rows of 8 px with a step of 10
+  const auto data = ramp(std::size_t{4} * 10);  // 3 rows of 8 px with a step of 10
   const auto m = image_from_raw(8, 3, 10, "mono8", std::span(data).first(28));
   ASSERT_THAT(m, IsOk());
   EXPECT_EQ(m->cols, 8);
@@ -71,7 +71,7 @@ class ImageFileTest : public ::testing::Test {
     std::filesystem::remove_all(dir_, ec);
   }
   std::string write(const std::string& name, const std::vector<std::uint8_t>& bytes) {
-    const std::string path = dir_ + "/" + name;
+    std::string path = dir_ + "/" + name;
     std::ofstream(path, std::ios::binary)
         .write(reinterpret_cast<const char*>(bytes.data()),
                static_cast<std::streamsize>(bytes.size()));

@@ -106,7 +106,7 @@ TEST(Planar7545, ParallaxCorrectionMatchesTheDigestsCase12) {
 TEST(Planar7545, OrientationMatchesTheDigestsCase11) {
   const double aspect = 3.56 / 3.48;
   // The digest lists the corners (j, i); ThesisPixel is (i, j). Ordered by eq. 4.16 first.
-  auto alpha = [&](std::vector<ThesisPixel> corners) {
+  auto alpha = [&](const std::vector<ThesisPixel>& corners) {
     const auto o = thesis_order_corners(corners);
     return thesis_alpha_deg(o[0].cast<double>(), o[1].cast<double>(), o[2].cast<double>(),
                             o[3].cast<double>(), aspect);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numbers>
 #include <utility>
@@ -281,7 +282,8 @@ Status PartClass::validate() const {
         !finite_positive(d.body_thickness_mm)) {
       return invalid(name, "DIP package dimensions must be > 0 (standoff >= 0)");
     }
-    const double rows = (d.pins / 2 - 1) * d.pitch_mm + d.shoulder_width_mm;
+    const int per_row = d.pins / 2;  // even, checked above
+    const double rows = (per_row - 1) * d.pitch_mm + d.shoulder_width_mm;
     if (rows > length_mm + kFitTolMm) {
       return invalid(name, fmt::format("{} pins at {} mm pitch need a body of at least {:.2f} mm, "
                                        "length_mm is {}",
@@ -411,8 +413,8 @@ PartClass make_polyhedron(std::string name,
   c.shape = Shape::kPolyhedron;
   c.reflectance = reflectance;
   c.yaw_symmetry = 1;
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY);
-  Eigen::Vector3d hi = Eigen::Vector3d::Constant(-INFINITY);
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = Eigen::Vector3d::Constant(-std::numeric_limits<double>::infinity());
   for (const auto& v : mesh_model.vertices) {
     lo = lo.cwiseMin(v);
     hi = hi.cwiseMax(v);

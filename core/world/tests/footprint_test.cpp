@@ -89,6 +89,7 @@ TEST(FootprintGrid, FindsEveryConflictTheNaiveCheckFinds) {
   std::uniform_real_distribution<double> pos(0.0, 500.0);
   std::uniform_real_distribution<double> yaw(-3.0, 3.0);
   std::vector<Footprint> all;
+  all.reserve(400);
   for (int i = 0; i < 400; ++i) {
     all.push_back(
         place_footprint({{-15, -4}, {15, -4}, {15, 4}, {-15, 4}}, pos(rng), pos(rng), yaw(rng)));

@@ -64,8 +64,8 @@ TEST(Catalogue, EveryBuiltInClassIsValidAndSane) {
     EXPECT_NEAR(cls->part_T_grasp.translation().head<2>().norm(), 0.0, kTolMm);
     EXPECT_TRUE(cls->part_T_grasp.linear().isIdentity(1e-12));
     // Hull points span the part's height.
-    double zmin = INFINITY;
-    double zmax = -INFINITY;
+    double zmin = std::numeric_limits<double>::infinity();
+    double zmax = -std::numeric_limits<double>::infinity();
     for (const auto& p : cls->hull_points) {
       zmin = std::min(zmin, p.z());
       zmax = std::max(zmax, p.z());

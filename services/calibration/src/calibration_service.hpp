@@ -61,7 +61,7 @@ class CalibrationService {
 
   void publish_current();
   Status publish_camera(const calibration::CameraCalibration& calibration);
-  Status publish_belt(const calibration::BeltCalibration& calibration);
+  Status publish_belt(const calibration::BeltCalibration& b);
 
   void progress(const Key& key, cell_calibration_CalibrationProcedure procedure,
                 const std::string& device, std::string_view stage, std::size_t step,
@@ -102,6 +102,6 @@ class CalibrationService {
 };
 
 /// "intrinsics", "hand_eye", ... for the IDL enum ("unknown" otherwise).
-std::string_view procedure_name(const cell_calibration_CalibrationProcedure& procedure) noexcept;
+std::string_view procedure_name(const cell_calibration_CalibrationProcedure& field) noexcept;
 
 }  // namespace cell::calibration_service

@@ -1,6 +1,8 @@
 #include "procedures.hpp"
 
 #include <cmath>
+#include <cstdio>
+#include <exception>
 #include <filesystem>
 #include <map>
 #include <numbers>
@@ -151,12 +153,20 @@ Status Procedures::sim_setup(const SimSetup& sim, const cal::BoardSpec* board) {
   return link_->reset_world(sim_scene_yaml(sim, board), sim.scene_file);
 }
 
-void Procedures::sim_restore(const SimSetup& sim) {
+void Procedures::sim_restore(const SimSetup& sim) noexcept {
   if (!sim.enabled || !sim.restore || link_ == nullptr) {
     return;
   }
-  if (auto s = link_->reset_world("", ""); !s) {
-    log::warn("sim_restore", s.error().message);
+  try {
+    if (auto s = link_->reset_world("", ""); !s) {
+      log::warn("sim_restore", s.error().message);
+    }
+  } catch (const std::exception& e) {  // run from a guard's destructor: report, never throw
+    try {
+      log::warn("sim_restore", e.what());
+    } catch (...) {
+      (void)std::fputs("calibration: sim_restore failed and could not log why\n", stderr);
+    }
   }
 }
 
@@ -310,7 +320,7 @@ Result<Procedures::Capture> Procedures::load_data_set(const std::string& dir,
     progress("detect", ++k, 0, image);
     cv::Mat gray;
     try {
-      gray = cv::imread(dir + "/" + image, cv::IMREAD_GRAYSCALE);
+      gray = cv::imread(fmt::format("{}/{}", dir, image), cv::IMREAD_GRAYSCALE);
     } catch (const cv::Exception&) {
       gray.release();
     }

@@ -83,7 +83,9 @@ class Procedures {
                                 const calibration::BoardSpec& board);
   /// Sets the simulated world up; the returned guard restores it.
   Status sim_setup(const SimSetup& sim, const calibration::BoardSpec* board);
-  void sim_restore(const SimSetup& sim);
+  /// Puts the simulated world back (a guard's destructor calls it): never throws; a failure
+  /// is logged.
+  void sim_restore(const SimSetup& sim) noexcept;
   bool cancelled() const noexcept { return cancel_.load(); }
   void progress(std::string_view stage, std::size_t step, std::size_t total,
                 std::string_view message) const;

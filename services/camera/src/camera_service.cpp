@@ -53,8 +53,7 @@ std::string join(const std::set<std::string>& items) {
 }  // namespace
 
 CameraService::CameraService(service::Context& ctx, const CameraConfig& config)
-    : ctx_(ctx),
-      config_(config),
+    : config_(config),
       frame_id_(config.camera_id),
       known_cameras_(cell_cameras()),
       next_free_(steady_clock::now()),

@@ -74,7 +74,6 @@ class CameraService {
   /// Steady-clock deadline of the next scheduled or free-running exposure.
   std::chrono::steady_clock::time_point next_wakeup() const;
 
-  service::Context& ctx_;
   CameraConfig config_;
   std::unique_ptr<CameraSource> source_;
   std::string robot_id_;         // joints at exposure ("" when none)

@@ -69,7 +69,7 @@ class Bus {
         belt(participant_, belt_topic_, bus::topics::kBeltState),
         photocell(participant_, photocell_topic_, bus::topics::kPhotocell) {}
 
-  void wait_matched() {
+  void wait_matched() const {
     ASSERT_TRUE(requests.wait_for_readers(1, kWait));
     ASSERT_TRUE(images.wait_for_writers(1, kWait));
     ASSERT_TRUE(truths.wait_for_writers(1, kWait));
@@ -88,14 +88,13 @@ class Bus {
     return seq_;
   }
 
-  void publish_robot(const std::vector<double>& joints, std::int64_t stamp_ns, bool halogen) {
+  void publish_robot(const std::vector<double>& joints, std::int64_t stamp_ns, bool halogen) const {
     static const std::string kId = "ibm7545";
-    std::vector<double> q = joints;
     cell_robot_RobotState s{};
     s.robot_id = bus::borrow(kId);
     s.header.stamp_ns = stamp_ns;
     s.header.frame_id = bus::borrow(kId);
-    bus::borrow(s.position_rad_or_mm, q);
+    bus::borrow(s.position_rad_or_mm, joints);
     s.base_T_tool.orientation.w = 1.0;
     s.halogen_on = halogen;
     s.fluorescent_on = true;

@@ -26,7 +26,7 @@ Result<EchoConfig> load_config(const config::Document& doc) {
 
 EchoService::EchoService(service::Context& /*ctx*/, const EchoConfig& config) : config_(config) {}
 
-void EchoService::run(service::Context& ctx) {
+void EchoService::run(service::Context& ctx) const {
   constexpr dds_attach_t kStop = 1;
   bus::WaitSet waitset(ctx.participant());
   waitset.attach(ctx.stop_guard().get(), kStop);

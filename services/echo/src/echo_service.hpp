@@ -20,7 +20,7 @@ Result<EchoConfig> load_config(const config::Document& doc);
 class EchoService {
  public:
   EchoService(service::Context& ctx, const EchoConfig& config);
-  void run(service::Context& ctx);
+  void run(service::Context& ctx) const;
 
  private:
   EchoConfig config_;

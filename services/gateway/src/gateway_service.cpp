@@ -4,9 +4,9 @@
 #include <fmt/ranges.h>
 #include <pthread.h>
 #include <sched.h>
-#include <time.h>
 
 #include <cmath>
+#include <ctime>
 #include <stdexcept>
 
 #include "cell/bus/view.hpp"

@@ -264,7 +264,9 @@ class Dpr7545DriverTest : public ::testing::Test {
       : model_(std::move(model)),
         memory_(d::make_heap_transport()),
         slave_(memory_->window()),
-        driver_(model_, options, kPeriod,
+        driver_(model_,
+                std::move(options),
+                kPeriod,
                 [this]() -> Result<std::unique_ptr<d::Transport>> {
                   return std::unique_ptr<d::Transport>(
                       std::make_unique<ViewTransport>(memory_->window()));

@@ -78,7 +78,7 @@ JointVector deg(std::initializer_list<double> values) {
 
 /// The controller for these tests: the robot's limits in controller angles, fast joints (a
 /// 20 deg move takes about 0.2 s), a 6809 that needs 0.3 ms between characters.
-pe::ControllerSettings controller(const kinematics::RobotModel& model, JointVector initial) {
+pe::ControllerSettings controller(const kinematics::RobotModel& model, const JointVector& initial) {
   const auto& ex = *model.excalibur();
   JointVector lower(6);
   JointVector upper(6);
@@ -111,7 +111,7 @@ class ExcaliburDriverTest : public ::testing::Test {
                   .string()) {}
 
   void start_sim(pe::ControllerSettings settings, pe::NoiseSettings noise = {}) {
-    auto sim = pe::SimulatedController::start(*dialect_, std::move(settings),
+    auto sim = pe::SimulatedController::start(*dialect_, settings,
                                               {.link_path = link_, .baud = 115200}, noise);
     ASSERT_THAT(sim, IsOk());
     sim_ = std::move(*sim);
@@ -133,7 +133,7 @@ class ExcaliburDriverTest : public ::testing::Test {
     ASSERT_THAT(driver_->on_configure(), IsOk());
     ASSERT_THAT(driver_->on_activate(), IsOk());
   }
-  void start(JointVector initial = deg({0, 30, -150, 0, 0, 0})) {
+  void start(const JointVector& initial = deg({0, 30, -150, 0, 0, 0})) {
     start_sim(controller(model_, initial));
     start_driver(options());
   }

@@ -43,8 +43,9 @@ TEST(GatewayConfig, DriverKeysAreCheckedByTheDriverWithLocations) {
   EXPECT_THAT(config.error().message,
               ::testing::HasSubstr("key 'driver.gripper_time_s': must be in [0, 10], got -1"));
   EXPECT_THAT(config.error().message, ::testing::HasSubstr("unknown key 'driver.colour'"));
-  doc = config::load_string("robot_config: x.yaml\ndriver: {kind: puma}\n", "g.yaml");
-  config = load_config(*doc);
+  const auto puma = config::load_string("robot_config: x.yaml\ndriver: {kind: puma}\n", "g.yaml");
+  ASSERT_TRUE(puma);
+  config = load_config(*puma);
   ASSERT_FALSE(config);
   EXPECT_THAT(
       config.error().message,

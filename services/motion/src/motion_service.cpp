@@ -86,8 +86,7 @@ std::string_view to_string(cell_motion_MotionKind kind) noexcept {
 }
 
 MotionService::MotionService(service::Context& ctx, const MotionConfig& config)
-    : ctx_(ctx),
-      config_(config),
+    : config_(config),
       client_id_(bus::make_client_id(config.common.service_id)),
       request_topic_(ctx.participant(), bus::topics::kMotionRequest),
       status_topic_(ctx.participant(), bus::topics::kMotionStatus),
@@ -291,7 +290,7 @@ void MotionService::handle_request(const cell_motion_MotionRequest& request) {
   const std::string motion_id(bus::str(request.motion_id));
   const std::string robot_id(bus::str(request.robot_id));
   const std::string kind(to_string(request.kind));
-  auto refuse = [&](Error error) {
+  auto refuse = [&](const Error& error) {
     log::warn("refuse", error.message, {{"motion", motion_id}, {"robot", robot_id}, {"kind", kind}});
     publish(motion_id, request.request_id, robot_id, cell_motion_MOTION_REFUSED, &error);
   };

@@ -92,7 +92,6 @@ class MotionService {
                const Meeting* meeting = nullptr);
   void finish(Robot& robot, cell_motion_MotionState state, const Error* error);
 
-  service::Context& ctx_;
   MotionConfig config_;
   std::string client_id_;
   std::uint64_t seq_ = 0;

@@ -1,10 +1,10 @@
 #include "slave.hpp"
 
 #include <sys/prctl.h>
-#include <time.h>
 
 #include <algorithm>
 #include <cmath>
+#include <ctime>
 
 namespace cell::sim7545 {
 namespace {

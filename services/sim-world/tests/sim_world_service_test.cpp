@@ -5,9 +5,9 @@
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <signal.h>
 
 #include <chrono>
+#include <csignal>
 #include <fstream>
 #include <string>
 #include <thread>
@@ -265,10 +265,12 @@ TEST_F(SimWorldTest, SpawnRemoveAndScatterAreAllOrNothing) {
     EXPECT_EQ(bus::str(p.class_name), "dip8");
   }
   std::vector<cell_common_Vector3> positions;
+  positions.reserve(first.size());
   for (const auto& p : first) {
     positions.push_back(p.world_T_part.position_mm);
   }
   std::vector<char*> scattered_ids;
+  scattered_ids.reserve(scattered.size());
   for (const auto& id : scattered) {
     scattered_ids.push_back(bus::borrow(id));
   }

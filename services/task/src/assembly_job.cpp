@@ -341,7 +341,7 @@ class AssemblyJob {
         continue;
       }
       run_.count("grasp_missed");
-      const int misses = run_.counters().at("grasp_missed");
+      const int misses = static_cast<int>(run_.counters().at("grasp_missed"));
       log::warn("assembly_grasp",
                 fmt::format("situation {}: the gripper did not take {}: it is still where it "
                             "was (miss {} of at most {})",

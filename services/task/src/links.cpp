@@ -124,6 +124,7 @@ std::uint64_t Peers::generation(const std::string& id) const {
 
 std::vector<std::uint64_t> Peers::generations(const std::vector<std::string>& ids) const {
   std::vector<std::uint64_t> out;
+  out.reserve(ids.size());
   for (const auto& id : ids) {
     out.push_back(generation(id));
   }

@@ -127,7 +127,7 @@ class Peer {
         detections(participant_, detections_topic_, bus::topics::kDetections),
         results(participant_, edge_result_topic_, bus::topics::kEdgeResult) {}
 
-  void wait_matched() {
+  void wait_matched() const {
     ASSERT_TRUE(images.wait_for_readers(1, kWait));
     ASSERT_TRUE(edges.wait_for_readers(1, kWait));
     ASSERT_TRUE(calibrations.wait_for_readers(1, kWait));
@@ -168,7 +168,7 @@ class Peer {
     return seq_;
   }
 
-  void publish(const calibration::CameraCalibration& c) {
+  void publish(const calibration::CameraCalibration& c) const {
     calibration::IdlHolder holder;
     const auto sample = calibration::to_idl(c, holder, wall_time_ns());
     EXPECT_TRUE(calibrations.write(sample));

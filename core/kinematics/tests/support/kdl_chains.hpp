@@ -30,9 +30,9 @@ inline Eigen::Isometry3d from_kdl(const KDL::Frame& f, double scale = 1.0) {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
-      pose.linear()(i, j) = f.M(static_cast<unsigned>(i), static_cast<unsigned>(j));
+      pose.linear()(i, j) = f.M(i, j);
     }
-    pose.translation()(i) = f.p(static_cast<unsigned>(i)) / scale;
+    pose.translation()(i) = f.p(i) / scale;
   }
   return pose;
 }

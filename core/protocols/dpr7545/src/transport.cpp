@@ -1,16 +1,15 @@
 #include "cell/dpr7545/transport.hpp"
 
 #include <fcntl.h>
-#include <signal.h>
+#include <fmt/format.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <csignal>
 #include <cstring>
 #include <new>
-
-#include <fmt/format.h>
 
 #include "cell/dpr7545/sim_control.hpp"
 

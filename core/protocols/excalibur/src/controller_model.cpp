@@ -56,7 +56,7 @@ Status ControllerSettings::validate() const {
 
 ControllerModel::ControllerModel(Dialect dialect, ControllerSettings settings, double now_s)
     : dialect_(std::move(dialect)),
-      settings_(std::move(settings)),
+      settings_(settings),
       rng_(settings_.seed),
       noise_in_(settings_.seed * 7919 + 1),
       noise_out_(settings_.seed * 104729 + 2) {

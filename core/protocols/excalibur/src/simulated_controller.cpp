@@ -45,7 +45,7 @@ Result<std::unique_ptr<SimulatedController>> SimulatedController::start(Dialect 
   if (!link.link_path.empty()) {
     CELL_TRY(pty->publish(link.link_path));
   }
-  ControllerModel model(std::move(dialect), std::move(settings), 0.0);
+  ControllerModel model(std::move(dialect), settings, 0.0);
   std::unique_ptr<SimulatedController> sim(
       new SimulatedController(std::move(*pty), std::move(model), std::move(link), noise));
   sim->wake_fd_ = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);

@@ -51,7 +51,7 @@ struct Host {
     std::this_thread::sleep_for(50ms);
     port->discard_replies();
   }
-  Result<Message> exchange(const Command& c) {
+  Result<Message> exchange(const Command& c) const {
     port->discard_replies();
     CELL_TRY(port->write_line(*dialect.format(c) + dialect.framing().host_terminator));
     auto line = port->wait_reply(1s);

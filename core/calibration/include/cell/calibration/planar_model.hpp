@@ -129,8 +129,9 @@ Result<PlanarReport> refine_planar(const PlanarParameters& initial,
 /// from where the Ref_Point's ray meets the plane. Lens distortion is not representable in the
 /// planar model and is left out (so is a camera tilt). Errors: kInvalidArgument unless the
 /// calibration is a pinhole, eye-in-hand on link 2 of a SCARA with `link1_mm`, `link2_mm`.
-Result<PlanarParameters> planar_from_pinhole(const CameraCalibration& pinhole,
-                                             const Eigen::Vector2d& ref_px, double link1_mm,
+Result<PlanarParameters> planar_from_pinhole(const CameraCalibration& calibration,
+                                             const Eigen::Vector2d& ref_px,
+                                             double link1_mm,
                                              double link2_mm);
 
 }  // namespace cell::calibration

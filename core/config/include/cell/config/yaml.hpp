@@ -7,6 +7,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <yaml-cpp/yaml.h>
@@ -15,8 +16,17 @@
 
 namespace cell::config {
 
-/// A parsed YAML document plus the file it came from (for error locations).
+/// A parsed YAML document plus the file it came from (for error locations). Copied or moved,
+/// never assigned: yaml-cpp's Node assignment re-points every node that shares the old root's
+/// data at the new one (Node::AssignNode's set_ref), which can also throw.
 struct Document {
+  Document(std::string file, const YAML::Node& node) : path(std::move(file)), root(node) {}
+  Document(const Document&) = default;
+  Document(Document&&) = default;
+  Document& operator=(const Document&) = delete;
+  Document& operator=(Document&&) = delete;
+  ~Document() = default;
+
   std::string path;
   YAML::Node root;
 };

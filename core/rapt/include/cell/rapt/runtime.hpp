@@ -84,7 +84,7 @@ struct RunResult {
 /// kInvalidArgument listing every problem, each with the reading's position or the LOOK's
 /// line:column. Evaluation errors (coincident end points, a face no rotation can satisfy) are
 /// kOutOfRange/kInvalidArgument naming the LOOK. Pure; allocation proportional to the array.
-Result<RunResult> run(const CompiledProgram& program,
+Result<RunResult> run(const CompiledProgram& cp,
                       const std::vector<Reading>& readings,
                       const RunOptions& options = {});
 

@@ -80,7 +80,11 @@ template <typename Config>
 using ConfigLoader = Result<Config> (*)(const config::Document&);
 
 namespace detail {
-int report_exception(const std::exception& e, bool bus_error);
+int report_exception(const std::exception& e, bool bus_error) noexcept;
+/// An exception not derived from std::exception: logged as such; returns kExitFailure.
+int report_unknown_exception() noexcept;
+template <typename Config, typename Service>
+int run_service(int argc, char** argv, const ServiceInfo& info, ConfigLoader<Config> load);
 /// Logs a (possibly multi-line) config error, one line per problem; returns kExitConfig.
 int report_config_error(const Error& error);
 Result<config::Document> load_document(const CommandLine& cli);
@@ -90,8 +94,24 @@ Result<config::Document> load_document(const CommandLine& cli);
 /// participant -> service (its readers/writers) -> service.run(ctx) until stop -> RAII
 /// teardown. `Config` has a member `CommonConfig common`; `Service` is constructible from
 /// (Context&, const Config&) and has `void run(Context&)`. Returns the exit code.
+/// Nothing escapes it: an exception anywhere (the command line, a config loader that threw
+/// instead of returning an Error, the service) is logged and gives a non-zero exit code.
 template <typename Config, typename Service>
-int run(int argc, char** argv, const ServiceInfo& info, ConfigLoader<Config> load) {
+int run(int argc, char** argv, const ServiceInfo& info, ConfigLoader<Config> load) noexcept {
+  try {
+    return detail::run_service<Config, Service>(argc, argv, info, load);
+  } catch (const bus::BusError& e) {
+    return detail::report_exception(e, true);
+  } catch (const std::exception& e) {
+    return detail::report_exception(e, false);
+  } catch (...) {
+    return detail::report_unknown_exception();
+  }
+}
+
+namespace detail {
+template <typename Config, typename Service>
+int run_service(int argc, char** argv, const ServiceInfo& info, ConfigLoader<Config> load) {
   ShutdownSignal shutdown;  // FIRST: blocks the signals before any thread exists
   const CommandLine cli = parse_command_line(argc, argv, info);
   if (cli.exit_code) {
@@ -120,20 +140,15 @@ int run(int argc, char** argv, const ServiceInfo& info, ConfigLoader<Config> loa
     return detail::report_config_error(with_context(s.error(), doc->path));
   }
   log::init(info.kind, common.log_level);
-  try {
-    bus::Participant participant(common.domain_id, common.partition);
-    Context ctx(participant, common, info, shutdown);
-    Service service(ctx, *config);
-    log::info("start", "serving", {{"id", common.service_id}, {"config", doc->path}});
-    service.run(ctx);
-    ctx.health().set(cell_health_HEALTH_STOPPING);
-    log::info("stop", "stopped cleanly", {{"id", common.service_id}});
-  } catch (const bus::BusError& e) {
-    return detail::report_exception(e, true);
-  } catch (const std::exception& e) {
-    return detail::report_exception(e, false);
-  }
+  bus::Participant participant(common.domain_id, common.partition);
+  Context ctx(participant, common, info, shutdown);
+  Service service(ctx, *config);
+  log::info("start", "serving", {{"id", common.service_id}, {"config", doc->path}});
+  service.run(ctx);
+  ctx.health().set(cell_health_HEALTH_STOPPING);
+  log::info("stop", "stopped cleanly", {{"id", common.service_id}});
   return kExitOk;
 }
+}  // namespace detail
 
 }  // namespace cell::service
