@@ -264,6 +264,7 @@ TEST_F(ExcaliburDriverTest, AMoveNotAchievedIsReportedFailedWithTheArmsTrueAngle
 
 // Digest 001 case 17: tolerance 1.0 deg; an arm 0.8 deg off is not resynced, 1.2 deg off is.
 TEST_F(ExcaliburDriverTest, PositionCheckResyncsOnlyBeyondTheToleranceDigestCase17) {
+  dialect_ = dialect_with_reply_timeout(3000);  // no line error, whatever the host's load
   for (const double bias : {0.8, 1.2}) {
     SCOPED_TRACE(bias);
     pe::ControllerSettings s = controller(model_, deg({0, 30, -150, 0, 0, 0}));
@@ -322,6 +323,9 @@ TEST_F(ExcaliburDriverTest, PersistentLineErrorsBecomeAnOperatorFaultThatResetCl
 }
 
 TEST_F(ExcaliburDriverTest, ALostControllerIsAFaultAndAReplacementIsFoundAfterReset) {
+  // The controller is lost by its pty going away, not by a slow reply: a loaded host must not
+  // fail the activation or the relink with a line error first.
+  dialect_ = dialect_with_reply_timeout(3000);
   start();
   sim_.reset();  // the simulator dies: its pty and symlink go away
   ASSERT_TRUE(move_to(deg({10, 30, -150, 0, 0, 0}), 20s));

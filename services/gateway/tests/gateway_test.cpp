@@ -256,12 +256,15 @@ TEST(GatewaySupervisor, StopsTheRobotMovingOrAtRestWhenEverySupervisorIsLostAndS
   ASSERT_EQ(::kill(supervisor->pid(), SIGKILL), 0);
   (void)supervisor->wait_for(5s);
   std::optional<bus::Owned<cell_robot_RobotState>> stopped;
-  ASSERT_TRUE(cell::testing::eventually(
-      [&] {
-        stopped = latest();
-        return stopped && (*stopped)->mode == cell_robot_MODE_STOPPED;
-      },
-      10s))
+  auto wait_stopped = [&] {
+    return cell::testing::eventually(
+        [&] {
+          stopped = latest();
+          return stopped && (*stopped)->mode == cell_robot_MODE_STOPPED;
+        },
+        10s);
+  };
+  ASSERT_TRUE(wait_stopped())
       << "the robot must be stopped once its only supervisor is lost";
   const double after_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - killed_at).count();
@@ -327,12 +330,7 @@ TEST(GatewaySupervisor, StopsTheRobotMovingOrAtRestWhenEverySupervisorIsLostAndS
   const double z_resting = bus::span((*resting)->position_rad_or_mm)[2];
   ASSERT_EQ(::kill(second->pid(), SIGKILL), 0);
   (void)second->wait_for(5s);
-  ASSERT_TRUE(cell::testing::eventually(
-      [&] {
-        stopped = latest();
-        return stopped && (*stopped)->mode == cell_robot_MODE_STOPPED;
-      },
-      10s))
+  ASSERT_TRUE(wait_stopped())
       << "a robot at rest is stopped too once its only supervisor is lost";
   EXPECT_EQ(bus::str((*stopped)->stop_code), "supervisor_lost");
   EXPECT_EQ(bus::str((*stopped)->fault_text), "stopped: supervisor 'task' lost");

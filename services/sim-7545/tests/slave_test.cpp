@@ -195,36 +195,38 @@ TEST_F(SlaveTest, InjectedDeadlineMissSetsTorquesLate) {
   EXPECT_EQ(dpr_.error(), d::kErrTorquesLate);
 }
 
-/// The slave with SimConfig::deadline_slack_us = 2 periods (40 ms).
+/// The slave with SimConfig::deadline_slack_us = 10 periods (200 ms).
 class SlackSlaveTest : public SlaveTest {
  protected:
   SlackSlaveTest() : SlaveTest(slack_options()) {}
   static SlaveOptions slack_options() {
     SlaveOptions o = fast_options();
-    o.deadline_slack_s = 0.040;
+    o.deadline_slack_s = 0.200;
     return o;
   }
 };
 
-// A master 1.5 periods late (a stalled host) is served when the slack covers it; one that
-// never answers still gets 0x1000, at period + slack after the period started, not before.
+// A master 5 periods late (a stalled host) is served when the slack covers it; one that never
+// answers still gets 0x1000, at period + slack after the period started, not before. (The
+// slave sees the lateness only if it looks at the period's deadline before the master answers:
+// with 1.5 periods of lateness, a loaded host that woke the slave 10 ms late hid it.)
 TEST_F(SlackSlaveTest, AMasterLateWithinTheSlackIsServedAndOneThatNeverAnswersIsNot) {
   enter_control();
   ASSERT_TRUE(serve());
   ASSERT_TRUE(spin_until([&] { return (dpr_.timing_a() & d::kTimingAStart) != 0; }));
-  std::this_thread::sleep_for(30ms);  // 1.5 periods: the board of Appendix C flags 0x1000
+  std::this_thread::sleep_for(100ms);  // 5 periods: the board of Appendix C flags 0x1000
   ASSERT_TRUE(serve()) << "error 0x" << std::hex << dpr_.error();
   ASSERT_TRUE(serve()) << "error 0x" << std::hex << dpr_.error();
   EXPECT_EQ(dpr_.error(), 0);
   EXPECT_EQ(slave_->take_snapshot().deadline_errors, 0U);
   EXPECT_GE(slave_->take_snapshot().late_served, 1U);  // counted: the board would have faulted
   // Now the master stops answering. The next period starts within one period of t0 and its
-  // deadline is a period plus the slack after that start: >= 60 ms from t0 (the board: <= 40).
+  // deadline is a period plus the slack after that start: >= 220 ms from t0 (the board: <= 40).
   const auto t0 = std::chrono::steady_clock::now();
   ASSERT_TRUE(eventually([&] { return dpr_.error() != 0; }, 2s));
   const auto waited = std::chrono::steady_clock::now() - t0;
   EXPECT_EQ(dpr_.error(), d::kErrTorquesLate);
-  EXPECT_GE(waited, 55ms);
+  EXPECT_GE(waited, 215ms);
 }
 
 TEST_F(SlaveTest, GripperClosesThenOpensAndTheRegisterReadsZeroWhenDone) {
