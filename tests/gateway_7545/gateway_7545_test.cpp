@@ -7,6 +7,7 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -82,6 +83,7 @@ struct StateCopy {
   std::uint32_t fault_bits = 0;
   std::string fault_text;
   std::uint64_t overruns = 0;
+  std::int64_t stamp_ns = 0;  ///< when the joints were read (wall clock, every process)
 };
 
 StateCopy copy(const cell_robot_RobotState& s) {
@@ -99,6 +101,7 @@ StateCopy copy(const cell_robot_RobotState& s) {
   c.fault_bits = s.fault_bits;
   c.fault_text = bus::str(s.fault_text);
   c.overruns = s.cycle_overruns;
+  c.stamp_ns = s.header.stamp_ns;
   return c;
 }
 
@@ -237,27 +240,25 @@ class Gateway7545Test : public ::testing::Test {
     for (auto& s : *batch) {
       const std::string_view id = bus::str(s->robot_id);
       if (id == "ibm7545.sim") {
+        const std::int64_t previous_ns = sim_state_ ? sim_state_->stamp_ns : 0;
         sim_state_ = copy(s.get());
         if (sim_state_->overruns > overruns_) {  // a period past the board's deadline
           overruns_ = sim_state_->overruns;
           last_overrun_ = std::chrono::steady_clock::now();
+          // It happened since the previous state: the arm coasted on a stale torque from then
+          // until the loop caught up, and its error decays over the next 100 ms.
+          stall_windows_.emplace_back(previous_ns, sim_state_->stamp_ns + 100'000'000);
         }
       } else if (id == "ibm7545") {
         gateway_state_ = copy(s.get());
         const StateCopy& g = *gateway_state_;
-        // The statistics leave out the states within 100 ms of a period the board would have
-        // faulted on (the slack covered it): the arm coasted on a stale torque meanwhile, which
-        // says what the machine did, not the loop. They are counted and printed.
-        const bool near_stall =
-            std::chrono::steady_clock::now() - last_overrun_ < std::chrono::milliseconds(100);
-        if (tracking_ && near_stall) {
-          ++stalled_samples_;
-        } else if (tracking_ && g.moving && g.q.size() == 4 && g.setpoint.size() == 4) {
+        // Kept with their stamps; tracking_statistics() leaves out those a stall touched.
+        if (tracking_ && g.moving && g.q.size() == 4 && g.setpoint.size() == 4) {
+          TrackedState t{g.stamp_ns, {}};
           for (std::size_t j = 0; j < 4; ++j) {
-            const double counts = std::abs(g.q[j] - g.setpoint[j]) * cpu(j);
-            worst_following_[j] = std::max(worst_following_[j], counts);
+            t.error_counts[j] = std::abs(g.q[j] - g.setpoint[j]) * cpu(j);
           }
-          ++tracked_samples_;
+          tracked_.push_back(t);
         }
         if (g.mode == cell_robot_MODE_FAULT && (g.fault_bits & ~kDeadlineBits) != 0) {
           saw_fault_ = true;  // anything but a deadline miss (or a stall) is the loop's doing
@@ -443,10 +444,9 @@ class Gateway7545Test : public ::testing::Test {
   std::optional<bus::Owned<cell_motion_MotionStatus>> run_motion(Make&& make,
                                                                 std::chrono::seconds timeout) {
     for (int attempt = 0;; ++attempt) {
-      worst_following_ = {};
-      tracked_samples_ = 0;
+      tracked_.clear();
+      stall_windows_.clear();
       auto r = make();
-      stalled_samples_ = 0;
       saw_fault_ = false;  // of the run that completes
       auto status = wait_motion(send(r), timeout);
       // After a reset the arm may still creep onto its held setpoint while the next plan is
@@ -530,9 +530,41 @@ class Gateway7545Test : public ::testing::Test {
   int spontaneous_misses_ = 0;
   std::uint64_t overruns_ = 0;  ///< the simulator's cycle_overruns last seen
   std::chrono::steady_clock::time_point last_overrun_{};
-  int stalled_samples_ = 0;  ///< tracked states left out of the statistics (near a stall)
-  int tracked_samples_ = 0;
-  std::array<double, 4> worst_following_{};
+  /// A gateway state sampled while tracking: its stamp and |measured - setpoint| per joint.
+  struct TrackedState {
+    std::int64_t stamp_ns;
+    std::array<double, 4> error_counts;
+  };
+  std::vector<TrackedState> tracked_;  ///< of the motion run last (run_motion clears it)
+  /// [from, to] wall-clock stamps of the simulator's states between which a cycle overran
+  /// (the slack absorbed it), to 100 ms after: the arm coasted on a stale torque meanwhile.
+  std::vector<std::pair<std::int64_t, std::int64_t>> stall_windows_;
+
+  /// The worst following error over the tracked states no stall touched, with how many were
+  /// kept and left out. A state is judged by its own stamp against the windows, after the
+  /// move: not by when the test happened to read it.
+  struct Tracking {
+    std::array<double, 4> worst{};
+    int kept = 0;
+    int left_out = 0;
+  };
+  Tracking tracking_statistics() const {
+    Tracking out;
+    for (const auto& t : tracked_) {
+      const bool stalled = std::any_of(
+          stall_windows_.begin(), stall_windows_.end(),
+          [&](const auto& w) { return w.first <= t.stamp_ns && t.stamp_ns <= w.second; });
+      if (stalled) {
+        ++out.left_out;
+        continue;
+      }
+      for (std::size_t j = 0; j < 4; ++j) {
+        out.worst[j] = std::max(out.worst[j], t.error_counts[j]);
+      }
+      ++out.kept;
+    }
+    return out;
+  }
   std::string robot_storage_;
   std::string motion_id_;
   int motion_counter_ = 0;
@@ -558,26 +590,50 @@ TEST_F(Gateway7545Test, HomesThenTracksAViaPointPathWithinTheFollowingErrorBound
   // which the via-point planner does not size for (it sizes for speed, as the thesis).
   const std::vector<double> via = {deg(40), deg(50), 100.0, deg(30)};
   const std::vector<double> target = {deg(90), deg(100), 180.0, deg(60)};
-  tracking_ = true;
-  auto status = run_motion(
-      [&] {
-        auto r = via_path(via, target);
-        r.speed_scale = 0.8;
-        return r;
-      },
-      60s);
-  tracking_ = false;
-  ASSERT_TRUE(status.has_value()) << "no terminal motion status";
-  ASSERT_EQ((*status)->state, cell_motion_MOTION_DONE) << bus::str((*status)->reason);
-  EXPECT_FALSE(saw_fault_);
-  EXPECT_GT(tracked_samples_, 50);  // a 100 Hz stream over a move of seconds
-  std::printf("worst following error over %d states (%d near a machine stall left out) "
-              "[counts]: J1 %.1f, J2 %.1f, Z %.1f, R %.1f\n",
-              tracked_samples_, stalled_samples_, worst_following_[0], worst_following_[1], worst_following_[2],
-              worst_following_[3]);
+  // The statistics need 50 states no machine stall touched (a 100 Hz stream over a move of
+  // seconds). A host that stalls the loop all through a move leaves too few to judge the loop
+  // by: then the arm goes back home and the move runs again (at most three runs in all).
+  const std::vector<double> home_joints(4, 0.0);  // where home() left the arm (checked above)
+  Tracking stats;
+  for (int run = 0; run < 3; ++run) {
+    if (run > 0) {
+      std::printf("run %d: only %d of %d tracked states clear of a machine stall; again\n", run,
+                  stats.kept, stats.kept + stats.left_out);
+      auto back = run_motion(
+          [&] {
+            auto r = request(cell_motion_MOTION_MOVE_JOINTS, "ibm7545");
+            bus::borrow(r.joints_rad_or_mm, home_joints);
+            return r;
+          },
+          60s);
+      ASSERT_TRUE(back.has_value() && (*back)->state == cell_motion_MOTION_DONE);
+      settle();
+    }
+    tracking_ = true;
+    auto status = run_motion(
+        [&] {
+          auto r = via_path(via, target);
+          r.speed_scale = 0.8;
+          return r;
+        },
+        60s);
+    tracking_ = false;
+    ASSERT_TRUE(status.has_value()) << "no terminal motion status";
+    ASSERT_EQ((*status)->state, cell_motion_MOTION_DONE) << bus::str((*status)->reason);
+    EXPECT_FALSE(saw_fault_);
+    stats = tracking_statistics();
+    if (stats.kept > 50) {
+      break;
+    }
+  }
+  EXPECT_GT(stats.kept, 50);
+  std::printf(
+      "worst following error over %d states (%d near a machine stall left out) "
+      "[counts]: J1 %.1f, J2 %.1f, Z %.1f, R %.1f\n",
+      stats.kept, stats.left_out, stats.worst[0], stats.worst[1], stats.worst[2], stats.worst[3]);
   for (std::size_t j = 0; j < 4; ++j) {
-    EXPECT_LE(worst_following_[j], kMaxFollowingCounts[j]) << "joint " << j;
-    EXPECT_GT(worst_following_[j], 0.0) << "joint " << j << " (a real PD loop lags)";
+    EXPECT_LE(stats.worst[j], kMaxFollowingCounts[j]) << "joint " << j;
+    EXPECT_GT(stats.worst[j], 0.0) << "joint " << j << " (a real PD loop lags)";
   }
   settle();
   const std::vector<double> q = joints();
