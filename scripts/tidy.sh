@@ -44,11 +44,11 @@ echo "tidy.sh: clang-tidy $(clang-tidy --version | sed -n 's/.*version \([0-9.]*
 filter="^${root}/(core|services|clients|tests|bench)/"
 out="$(mktemp /tmp/cell-tidy-XXXXXX.log)"
 rc=0
-# Progress: a line every 10 units (run-clang-tidy numbers each unit it finishes).
+# Progress: a line every 10 units (run-clang-tidy prints each unit's command line when done).
 run-clang-tidy -quiet -p "$build" -j "$(nproc)" -header-filter "$filter" \
-  -extra-arg=-Wno-unknown-warning-option "${units[@]}" 2>&1 | sed 's/\x1b\[[0-9;]*m//g' |
-  tee "$out" | awk '/^\[[0-9]+\/[0-9]+\]/ { split(substr($1, 2), n, "/");
-    if (n[1] % 10 == 0) { printf "tidy.sh: %d of %d units\n", n[1], n[2] > "/dev/stderr"; fflush() } }' ||
+  -extra-arg=-Wno-unknown-warning-option "${units[@]}" 2>&1 | sed -u 's/\x1b\[[0-9;]*m//g' |
+  tee "$out" | awk -v total="${#units[@]}" '/^clang-tidy/ { if (++done % 10 == 0) {
+    printf "tidy.sh: %d of %d units\n", done, total > "/dev/stderr"; fflush() } }' ||
   rc=$?
 # run-clang-tidy prints each unit's command and warnings; keep the findings and their context.
 grep -E '^/.*: (warning|error): ' "$out" | sort -u > "$out.findings" || true

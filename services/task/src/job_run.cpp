@@ -373,13 +373,21 @@ Result<MotionOutcome> JobRun::move(cell_motion_MotionRequest& request,
     }
     // Busy: refused by the motion service (a motion of ours from before a restart still runs)
     // or by the gateway (a restarted motion service re-ran a request it had taken before).
-    const bool busy =
-        o && ((o->state == cell_motion_MOTION_REFUSED &&
-               o->reason.find("is busy with motion") != std::string::npos) ||
-              (o->state == cell_motion_MOTION_FAILED &&
-               o->reason.find("is busy with trajectory") != std::string::npos));
+    const bool busy = o && ((o->state == cell_motion_MOTION_REFUSED &&
+                             o->reason.find("is busy with motion") != std::string::npos) ||
+                            (o->state == cell_motion_MOTION_FAILED &&
+                             o->reason.find("is busy with trajectory") != std::string::npos));
     if (!busy || attempt == 5) {
       return o;
+    }
+    // Busy with this very motion: a motion service restarted while its trajectory ran took the
+    // request again, and the gateway still runs (or just ran) the first run's trajectory (the
+    // robot's state names it "<motion id>#<n>"). That run's outcome is the motion's, and
+    // nobody watches it now: let it finish and verify what it did, as for any unseen outcome.
+    // Sending the request again would do it twice (a second pick from above a part already
+    // held, and the part reported unreachable while it is in the gripper).
+    if (links_.robot(robot_id).trajectory_id.rfind(motion_id + "#", 0) == 0) {
+      return recover_unseen(motion_id, o->reason);
     }
     log::info("job", "robot busy with an earlier motion: waiting for it",
               {{"job", job_id_}, {"why", o->reason}});
