@@ -382,14 +382,35 @@ TEST_F(Dpr7545DriverTest, PdLawHoldsOnEveryExchangeWhileTheArmMoves) {
   slave_.home_landing = {0, 0, 0, 0};
   slave_.gain = 0.012;  // a crude plant: every accepted torque moves the joint a little
   home_and_engage();
-  const std::size_t first = slave_.periods().size();
+  // 40 exchanges in a row, each checked. A handshake the slave thread misses on a loaded host
+  // (kRetry, which the host tolerates) is no exchange to check and may leave a late period in
+  // the slave's record: the ramp goes on for a few cycles and the 40 start again (5 tries).
+  std::size_t first = 0;
   std::vector<JointVector> setpoints;
-  for (int k = 0; k < 40; ++k) {
-    setpoint_.q[0] = 0.0001 * k;  // rad: 5 counts per sample
-    setpoint_.q[2] = 0.01 * k;    // mm: 3.8 counts per sample
-    setpoints.push_back(setpoint_.q);
-    ASSERT_EQ(cycle(), CycleStatus::kOk) << k;
+  int n = 0;  // the ramp's sample: continuous across tries
+  bool clean = false;
+  for (int attempt = 0; attempt < 5 && !clean; ++attempt) {
+    first = slave_.periods().size();
+    setpoints.clear();
+    clean = true;
+    for (int k = 0; k < 40; ++k, ++n) {
+      setpoint_.q[0] = 0.0001 * n;  // rad: 5 counts per sample
+      setpoint_.q[2] = 0.01 * n;    // mm: 3.8 counts per sample
+      setpoints.push_back(setpoint_.q);
+      const CycleStatus status = cycle();
+      ASSERT_NE(status, CycleStatus::kFault) << n;
+      if (status != CycleStatus::kOk) {
+        clean = false;
+        for (int settle = 0; settle < 3; ++settle, ++n) {
+          setpoint_.q[0] = 0.0001 * n;
+          setpoint_.q[2] = 0.01 * n;
+          ASSERT_NE(cycle(), CycleStatus::kFault) << n;
+        }
+        break;
+      }
+    }
   }
+  ASSERT_TRUE(clean) << "no 40 exchanges in a row in 5 tries";
   const auto periods = slave_.periods();
   ASSERT_GE(periods.size(), first + 40);
   for (int k = 1; k < 40; ++k) {
