@@ -463,6 +463,17 @@ class Gateway7545Test : public ::testing::Test {
     }
   }
 
+  /// A MOVE_JOINTS to `q` (rad, mm), run to its end by run_motion.
+  std::optional<bus::Owned<cell_motion_MotionStatus>> move_joints(const std::vector<double>& q) {
+    return run_motion(
+        [&] {
+          auto r = request(cell_motion_MOTION_MOVE_JOINTS, "ibm7545");
+          bus::borrow(r.joints_rad_or_mm, q);
+          return r;
+        },
+        60s);
+  }
+
   /// A VIA_PATH request through the FK poses of `via` to that of `target` (joints).
   cell_motion_MotionRequest via_path(const std::vector<double>& via_joints,
                                      const std::vector<double>& target_joints) {
@@ -599,13 +610,7 @@ TEST_F(Gateway7545Test, HomesThenTracksAViaPointPathWithinTheFollowingErrorBound
     if (run > 0) {
       std::printf("run %d: only %d of %d tracked states clear of a machine stall; again\n", run,
                   stats.kept, stats.kept + stats.left_out);
-      auto back = run_motion(
-          [&] {
-            auto r = request(cell_motion_MOTION_MOVE_JOINTS, "ibm7545");
-            bus::borrow(r.joints_rad_or_mm, home_joints);
-            return r;
-          },
-          60s);
+      auto back = move_joints(home_joints);
       ASSERT_TRUE(back.has_value() && (*back)->state == cell_motion_MOTION_DONE);
       settle();
     }
@@ -736,13 +741,7 @@ TEST_F(Gateway7545Test, DeadlineMissStopsSafelyAndResetRecovers) {
       10s));
   settle();  // control mode restarted bumplessly and closed the coasting gap
   saw_fault_ = false;
-  auto done = run_motion(
-      [&] {
-        auto again = request(cell_motion_MOTION_MOVE_JOINTS, "ibm7545");
-        bus::borrow(again.joints_rad_or_mm, near);
-        return again;
-      },
-      60s);
+  auto done = move_joints(near);
   ASSERT_TRUE(done.has_value());
   EXPECT_EQ((*done)->state, cell_motion_MOTION_DONE) << bus::str((*done)->reason);
   EXPECT_FALSE(saw_fault_);
