@@ -46,9 +46,17 @@ struct Host {
         SerialPort::open(o, [this](std::string_view l) { return dialect.looks_unsolicited(l); });
     EXPECT_THAT(p, IsOk());
     port = std::move(*p);
-    // Connecting may cut a line in two (the power-up "ready" on its way): let the rest arrive
-    // and drop it, as the driver does when it connects.
-    std::this_thread::sleep_for(50ms);
+    // The simulator says "ready" at power-up, while this port opens (which flushes input):
+    // the line arrives whole (an unsolicited line), cut (its rest, a damaged reply line), or
+    // not at all (flushed whole). Wait for the first two, then drop the reply, as the driver
+    // does when it connects; a second is the wait for the third.
+    const auto until = std::chrono::steady_clock::now() + 1s;
+    ReceivedLine ready;
+    while (std::chrono::steady_clock::now() < until && !port->pop_unsolicited(ready)) {
+      if (port->wait_reply(10ms)) {
+        break;
+      }
+    }
     port->discard_replies();
   }
   Result<Message> exchange(const Command& c) const {
