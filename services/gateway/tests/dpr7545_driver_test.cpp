@@ -388,22 +388,24 @@ TEST_F(Dpr7545DriverTest, PdLawHoldsOnEveryExchangeWhileTheArmMoves) {
   std::size_t first = 0;
   std::vector<JointVector> setpoints;
   int n = 0;  // the ramp's sample: continuous across tries
+  const auto ramp = [&] {
+    setpoint_.q[0] = 0.0001 * n;  // rad: 5 counts per sample
+    setpoint_.q[2] = 0.01 * n;    // mm: 3.8 counts per sample
+  };
   bool clean = false;
   for (int attempt = 0; attempt < 5 && !clean; ++attempt) {
     first = slave_.periods().size();
     setpoints.clear();
     clean = true;
     for (int k = 0; k < 40; ++k, ++n) {
-      setpoint_.q[0] = 0.0001 * n;  // rad: 5 counts per sample
-      setpoint_.q[2] = 0.01 * n;    // mm: 3.8 counts per sample
+      ramp();
       setpoints.push_back(setpoint_.q);
       const CycleStatus status = cycle();
       ASSERT_NE(status, CycleStatus::kFault) << n;
       if (status != CycleStatus::kOk) {
         clean = false;
         for (int settle = 0; settle < 3; ++settle, ++n) {
-          setpoint_.q[0] = 0.0001 * n;
-          setpoint_.q[2] = 0.01 * n;
+          ramp();
           ASSERT_NE(cycle(), CycleStatus::kFault) << n;
         }
         break;
