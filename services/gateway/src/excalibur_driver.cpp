@@ -8,6 +8,7 @@
 #include <numbers>
 
 #include "cell/common/log.hpp"
+#include "cell/common/realtime.hpp"
 #include "cell/protocols/excalibur/angles.hpp"
 #include "cell/service/paths.hpp"
 
@@ -106,6 +107,7 @@ Status ExcaliburDriver::on_activate() {
   serial.command_delay_s = dialect_->timing().command_delay_s;
   serial.end_chars = framing.end_chars;
   serial.max_line_chars = framing.max_line_chars;
+  serial.realtime_priority = options_.realtime_priority;
   auto classify = [d = dialect_](std::string_view line) { return d->looks_unsolicited(line); };
   // The simulator (or a USB adapter) may appear after the gateway: retry for a bounded time.
   const auto deadline = Clock::now() + seconds(options_.open_timeout_s);
@@ -184,7 +186,13 @@ Status ExcaliburDriver::on_activate() {
              {"joints_deg", deg_list(measured_)},
              {"tolerance_deg", fmt::format("{}", tolerance_deg_)},
              {"mode", std::string(pe::to_string(mode_))}});
-  io_ = std::thread([this] { io_loop(); });
+  io_ = std::thread([this] {
+    if (!set_thread_fifo(options_.realtime_priority)) {
+      log::warn("excalibur", "cannot use SCHED_FIFO (not root?); the link runs with normal scheduling",
+                {{"priority", std::to_string(options_.realtime_priority)}});
+    }
+    io_loop();
+  });
   return ok_status();
 }
 
@@ -976,6 +984,12 @@ DriverFactory parse_excalibur_driver(config::MapReader& section) {
   section.optional("settle_deg", o.settle_deg);
   section.optional("gripper_time_s", o.gripper_time_s);
   section.optional("mode", mode);
+  section.optional("realtime_priority", o.realtime_priority);
+  if (o.realtime_priority < 0 || o.realtime_priority > 99) {
+    section.fail("realtime_priority",
+                 fmt::format("must be 0 (none) or a SCHED_FIFO priority 1..99, got {}",
+                             o.realtime_priority));
+  }
   if (protocols::excalibur::baud_constant(o.baud) == 0) {
     section.fail("baud", fmt::format("must be one of 1200, 2400, 4800, 9600, 19200, 38400, "
                                      "57600, 115200, 230400; got {}",

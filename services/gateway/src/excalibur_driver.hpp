@@ -49,6 +49,10 @@ struct ExcaliburDriverOptions {
   double settle_deg = 0.02;
   double gripper_time_s = 0.5;  ///< the gripper's aperture is not fed back: assumed time
   protocols::excalibur::Mode mode = protocols::excalibur::Mode::kHost;  ///< set on activate
+  /// SCHED_FIFO priority of the link's threads (the exchange thread, which paces every
+  /// character, and the port's reader); 0: normal scheduling. On a loaded host a normal thread
+  /// can be held off long enough that a reply misses its timeout and the link counts as lost.
+  int realtime_priority = 0;
 };
 
 /// Fault bits of the Excalibur driver (JointState::fault_bits).

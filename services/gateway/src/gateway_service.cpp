@@ -2,8 +2,6 @@
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
-#include <pthread.h>
-#include <sched.h>
 
 #include <cmath>
 #include <ctime>
@@ -11,6 +9,7 @@
 
 #include "cell/bus/view.hpp"
 #include "cell/common/log.hpp"
+#include "cell/common/realtime.hpp"
 #include "cell/common/time.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/motion/wire.hpp"
@@ -105,13 +104,9 @@ void GatewayService::publisher_loop() {
 }
 
 void GatewayService::servo_loop() {
-  if (config_.realtime_priority > 0) {
-    sched_param param{};
-    param.sched_priority = config_.realtime_priority;
-    if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &param) != 0) {
-      log::warn("servo", "cannot use SCHED_FIFO (not root?); running with normal scheduling",
-                {{"priority", std::to_string(config_.realtime_priority)}});
-    }
+  if (!set_thread_fifo(config_.realtime_priority)) {
+    log::warn("servo", "cannot use SCHED_FIFO (not root?); running with normal scheduling",
+              {{"priority", std::to_string(config_.realtime_priority)}});
   }
   const std::int64_t period_ns = static_cast<std::int64_t>(1e9 / config_.cycle_hz);
   const auto publish_every = static_cast<std::uint64_t>(

@@ -457,7 +457,8 @@ TEST(ExcaliburDriverConfig, ReadsItsKeysStrictlyWithLocations) {
       "  baud: 9601\n"
       "  tolerance_deg: 50\n"
       "  follow: sideways\n"
-      "  colour: red\n",
+      "  colour: red\n"
+      "  realtime_priority: -1\n",
       cell::testing::source_dir());
   auto config = load_config(*config::load_string(yaml, "g.yaml"));
   ASSERT_FALSE(config);
@@ -466,6 +467,8 @@ TEST(ExcaliburDriverConfig, ReadsItsKeysStrictlyWithLocations) {
   EXPECT_THAT(m, HasSubstr("key 'driver.tolerance_deg': 50 is outside the controller's range"));
   EXPECT_THAT(m, HasSubstr("key 'driver.follow': must be 'stream' or 'final', got 'sideways'"));
   EXPECT_THAT(m, HasSubstr("unknown key 'driver.colour'"));
+  EXPECT_THAT(m, HasSubstr("key 'driver.realtime_priority': must be 0 (none) or a SCHED_FIFO "
+                           "priority 1..99, got -1"));
   auto missing = load_config(*config::load_string(
       "robot_config: x.yaml\ndriver: {kind: excalibur, device: /tmp/x, dialect: /nope.yaml}\n",
       "g.yaml"));

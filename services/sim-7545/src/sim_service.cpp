@@ -1,7 +1,5 @@
 #include "sim_service.hpp"
 
-#include <pthread.h>
-#include <sched.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -13,6 +11,7 @@
 
 #include "cell/bus/view.hpp"
 #include "cell/common/log.hpp"
+#include "cell/common/realtime.hpp"
 #include "cell/common/time.hpp"
 #include "cell/dpr7545/sim_control.hpp"
 #include "cell/kinematics/robot_config.hpp"
@@ -92,13 +91,9 @@ SimService::SimService(service::Context& ctx, const SimConfig& config)
       state_topic_(ctx.participant(), bus::topics::kRobotState),
       state_writer_(ctx.participant(), state_topic_, bus::topics::kRobotState) {
   thread_ = std::thread([this] {
-    if (config_.realtime_priority > 0) {
-      sched_param param{};
-      param.sched_priority = config_.realtime_priority;
-      if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &param) != 0) {
-        log::warn("slave", "cannot use SCHED_FIFO (not root?); running with normal scheduling",
-                  {{"priority", std::to_string(config_.realtime_priority)}});
-      }
+    if (!set_thread_fifo(config_.realtime_priority)) {
+      log::warn("slave", "cannot use SCHED_FIFO (not root?); running with normal scheduling",
+                {{"priority", std::to_string(config_.realtime_priority)}});
     }
     slave_->run(stop_);
   });

@@ -10,6 +10,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "cell/common/realtime.hpp"
 #include "cell/dpr7545/transport.hpp"
 #include "cell/testing/env.hpp"
 
@@ -25,12 +26,22 @@ namespace d = dpr7545;
 // in tests/gateway_7545 and bench/servo.
 constexpr std::uint16_t kPeriodUs = 20000;
 
+/// The slave thread's SCHED_FIFO priority: config/sim-7545.yaml's realtime_priority.
+constexpr int kSlavePriority = 50;
+
 class SlaveTest : public ::testing::Test {
  protected:
   explicit SlaveTest(SlaveOptions options = fast_options())
       : transport_(d::make_heap_transport()), dpr_(transport_->window()) {
     slave_ = std::make_unique<Slave>(transport_->window(), options);
-    thread_ = std::thread([this] { slave_->run(stop_); });
+    // The slave program at SCHED_FIFO 50 where permitted (root), as cell-sim-7545 runs it
+    // (config/sim-7545.yaml): it stands for a board that is never descheduled. Under normal
+    // scheduling a loaded host stalled it mid-homing while Z moved under a held torque, and Z
+    // coasted 384 counts past its index into the overrun (0x20).
+    thread_ = std::thread([this] {
+      (void)set_thread_fifo(kSlavePriority);
+      slave_->run(stop_);
+    });
     dpr_.set_sample_period_us(kPeriodUs);
     // Wait until the program passed main_loop (which clears command and gripper) and runs its
     // idle loop, whose get_robot_state writes timing_A = 0xF: a command written before that

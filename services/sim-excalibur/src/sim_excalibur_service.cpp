@@ -91,6 +91,12 @@ Result<SimExcaliburConfig> load_config(const config::Document& doc) {
   root.optional("emulate_baud", c.emulate_baud);
   root.optional("robot_id", c.robot_id);
   root.optional("state_rate_hz", c.state_rate_hz);
+  root.optional("realtime_priority", c.realtime_priority);
+  if (c.realtime_priority < 0 || c.realtime_priority > 99) {
+    root.fail("realtime_priority",
+              fmt::format("must be 0 (none) or a SCHED_FIFO priority 1..99, got {}",
+                          c.realtime_priority));
+  }
   if (!(c.baud >= 300 && c.baud <= 4'000'000)) {
     root.fail("baud", fmt::format("must be in [300, 4000000], got {}", c.baud));
   }
@@ -251,12 +257,20 @@ SimExcaliburService::SimExcaliburService(service::Context& ctx, const SimExcalib
   }
   auto sim = pe::SimulatedController::start(
       std::move(*dialect), *settings,
-      {.link_path = config_.link_path, .baud = config_.baud, .emulate_baud = config_.emulate_baud},
+      {.link_path = config_.link_path,
+       .baud = config_.baud,
+       .emulate_baud = config_.emulate_baud,
+       .realtime_priority = config_.realtime_priority},
       config_.noise);
   if (!sim) {
     throw std::runtime_error(sim.error().message);
   }
   sim_ = std::move(*sim);
+  if (sim_->realtime_refused()) {
+    log::warn("sim_excalibur",
+              "cannot use SCHED_FIFO (not root?); the controller runs with normal scheduling",
+              {{"priority", std::to_string(config_.realtime_priority)}});
+  }
   check_control_file();
   log::info("sim_excalibur", "controller on a pseudo-terminal",
             {{"link", config_.link_path},

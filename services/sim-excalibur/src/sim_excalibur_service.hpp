@@ -25,6 +25,9 @@ struct SimExcaliburConfig {
   std::string link_path = "run/excalibur.pty";  ///< the pty's slave is published here
   int baud = 9600;                              ///< emulated line speed of the output
   bool emulate_baud = true;
+  /// SCHED_FIFO priority of the controller's thread (0: normal scheduling; refused without
+  /// root, with a warning). It stands for a controller that owns its processor.
+  int realtime_priority = 0;
   std::string robot_id = "excalibur.sim";  ///< RobotState id of the true angles
   double state_rate_hz = 20.0;
 

@@ -49,13 +49,14 @@ TEST(SimExcaliburConfig, LoadsTheShippedFileAndResolvesPaths) {
   EXPECT_TRUE(fs::path(c->link_path).is_absolute());
   EXPECT_THAT(c->link_path, ::testing::EndsWith("run/excalibur.pty"));
   EXPECT_DOUBLE_EQ(c->min_char_interval_ms, 1.2);
+  EXPECT_EQ(c->realtime_priority, 45);
 }
 
 TEST(SimExcaliburConfig, ErrorsNameFileLineColumnAndKey) {
   auto c = parse(
       "baud: 0\ncontroller:\n  speed_scale: -1\n  limits_deg: {theta1: [90, -90], "
       "theta9: [0, 1]}\n  power_up_mode: asleep\nnoise: {probability_per_line: 2}\n"
-      "colour: red\n");
+      "colour: red\nrealtime_priority: 100\n");
   ASSERT_FALSE(c);
   const std::string& m = c.error().message;
   EXPECT_THAT(m, HasSubstr("sim.yaml:1:7: key 'baud': must be in [300, 4000000], got 0"));
@@ -65,6 +66,8 @@ TEST(SimExcaliburConfig, ErrorsNameFileLineColumnAndKey) {
   EXPECT_THAT(m, HasSubstr("key 'controller.power_up_mode': must be host, manual"));
   EXPECT_THAT(m, HasSubstr("key 'noise.probability_per_line': must be a probability"));
   EXPECT_THAT(m, HasSubstr("unknown key 'colour'"));
+  EXPECT_THAT(m, HasSubstr("key 'realtime_priority': must be 0 (none) or a SCHED_FIFO priority "
+                           "1..99, got 100"));
 }
 
 TEST(SimExcaliburConfig, ControllerSettingsAreInTheControllersAngles) {

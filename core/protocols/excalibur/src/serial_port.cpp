@@ -11,6 +11,8 @@
 #include <cerrno>
 #include <cstring>
 
+#include "cell/common/realtime.hpp"
+
 namespace cell::protocols::excalibur {
 namespace {
 
@@ -135,7 +137,10 @@ void SerialPort::close_device() noexcept {
 
 void SerialPort::start_reader() {
   wake_fd_ = ::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
-  reader_ = std::thread([this, fd = fd_, wake = wake_fd_] { reader_loop(fd, wake); });
+  reader_ = std::thread([this, fd = fd_, wake = wake_fd_, priority = options_.realtime_priority] {
+    (void)set_thread_fifo(priority);
+    reader_loop(fd, wake);
+  });
 }
 
 void SerialPort::stop_reader() noexcept {

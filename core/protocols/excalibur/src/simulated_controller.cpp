@@ -10,6 +10,8 @@
 #include <cmath>
 #include <cstring>
 
+#include "cell/common/realtime.hpp"
+
 namespace cell::protocols::excalibur {
 namespace {
 
@@ -52,7 +54,14 @@ Result<std::unique_ptr<SimulatedController>> SimulatedController::start(Dialect 
   if (sim->wake_fd_ < 0) {
     return Error{Errc::kIo, fmt::format("eventfd: {}", std::strerror(errno))};
   }
-  sim->thread_ = std::thread([s = sim.get()] { s->loop(); });
+  sim->thread_ = std::thread([s = sim.get()] {
+    s->realtime_.store(set_thread_fifo(s->link_.realtime_priority) ? kRealtimeSettled
+                                                                   : kRealtimeRefused);
+    s->loop();
+  });
+  while (sim->realtime_.load() == kRealtimePending) {
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
   return sim;
 }
 

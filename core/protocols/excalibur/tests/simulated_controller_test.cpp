@@ -3,10 +3,12 @@
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sched.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
+#include <set>
 #include <thread>
 
 #include "cell/protocols/excalibur/serial_port.hpp"
@@ -35,8 +37,9 @@ struct Host {
   Dialect dialect = *Dialect::load(CELL_EXCALIBUR_DIALECT);
   std::unique_ptr<SerialPort> port;
 
-  explicit Host(const std::string& device) {
+  explicit Host(const std::string& device, int realtime_priority = 0) {
     SerialOptions o;
+    o.realtime_priority = realtime_priority;
     o.device = device;
     o.baud = 38400;
     o.emulate_baud = true;
@@ -98,6 +101,43 @@ TEST(SimulatedController, PublishesItsPtyAndTalksTheDialect) {
     EXPECT_NEAR(joints->angles_deg[0], 20.0, 0.3 + 0.01);
   }
   EXPECT_FALSE(std::filesystem::exists(std::filesystem::symlink_status(link)));
+}
+
+/// The SCHED_FIFO priorities of this process's threads (0 for the others).
+std::multiset<int> fifo_priorities() {
+  std::multiset<int> out;
+  for (const auto& task : std::filesystem::directory_iterator("/proc/self/task")) {
+    const auto tid = static_cast<pid_t>(std::stol(task.path().filename().string()));
+    sched_param param{};
+    if (::sched_getscheduler(tid) == SCHED_FIFO && ::sched_getparam(tid, &param) == 0) {
+      out.insert(param.sched_priority);
+    }
+  }
+  return out;
+}
+
+// The controller's thread and the host port's reader run under SCHED_FIFO when asked and
+// permitted (root), so a loaded host cannot hold a reply past the gateway's timeout; without
+// the privilege the controller says it was refused and both still talk.
+TEST(SimulatedController, RealtimePrioritiesReachTheControllerAndThePortReader) {
+  const std::string link = temp_link();
+  auto sim = SimulatedController::start(*Dialect::load(CELL_EXCALIBUR_DIALECT), fast_settings(),
+                                        {.link_path = link, .baud = 38400,
+                                         .realtime_priority = 45});
+  ASSERT_THAT(sim, IsOk());
+  Host host(link, 40);
+  auto joints = host.exchange(Command{});
+  ASSERT_THAT(joints, IsOk());
+  EXPECT_EQ(joints->kind, MessageKind::kJoints);
+  const std::multiset<int> fifo = fifo_priorities();
+  if (::geteuid() == 0) {
+    EXPECT_FALSE((*sim)->realtime_refused());
+    EXPECT_EQ(fifo.count(45), 1U);
+    EXPECT_EQ(fifo.count(40), 1U);
+  } else {
+    EXPECT_TRUE((*sim)->realtime_refused());
+    EXPECT_TRUE(fifo.empty());
+  }
 }
 
 TEST(SimulatedController, ReportsAMoveNotAchievedAsAnUnsolicitedMessage) {

@@ -31,6 +31,9 @@ struct SerialOptions {
   std::string end_chars = "\r\n";      ///< any of these ends a received line; empty lines dropped
   std::size_t max_line_chars = 256;    ///< a longer received line is cut and flagged overlong
   std::size_t max_queued_lines = 256;  ///< per queue; the oldest line is dropped beyond it
+  /// SCHED_FIFO priority of the reader thread (0: normal scheduling; refused silently without
+  /// the privilege: the owner of the port warns once for its own threads).
+  int realtime_priority = 0;
 };
 
 /// One received line (end characters removed).

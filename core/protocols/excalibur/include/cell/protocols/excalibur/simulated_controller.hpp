@@ -27,6 +27,10 @@ struct SimulatedLinkOptions {
   /// The loop looks at the line at least this often. It bounds the window in which the
   /// model must judge how fast characters arrived (ControllerModel::receive).
   double poll_period_s = 0.005;
+  /// SCHED_FIFO priority of the controller's thread (0: normal scheduling). The simulator
+  /// stands for a controller that owns its processor; on a loaded host a normal thread can
+  /// answer hundreds of milliseconds late and the host counts the line as lost.
+  int realtime_priority = 0;
 };
 
 /// The Excalibur controller on a pseudo-terminal: a ControllerModel run on its own thread
@@ -60,6 +64,9 @@ class SimulatedController {
   /// Lines the controller answered with an error since the last call, each with the reason
   /// (for the simulator's log).
   std::vector<std::string> take_rejections();
+  /// True when link.realtime_priority was asked for and the system refused it (the thread
+  /// runs with normal scheduling). Settled before start() returns.
+  bool realtime_refused() const noexcept { return realtime_.load() == kRealtimeRefused; }
 
  private:
   SimulatedController(PseudoTerminal pty,
@@ -73,6 +80,10 @@ class SimulatedController {
   SimulatedLinkOptions link_;
   std::chrono::steady_clock::time_point epoch_;
   int wake_fd_ = -1;
+  static constexpr int kRealtimePending = 0;
+  static constexpr int kRealtimeSettled = 1;
+  static constexpr int kRealtimeRefused = 2;
+  std::atomic<int> realtime_{kRealtimePending};
   std::thread thread_;
 
   mutable std::mutex mutex_;  // guards model_, noise_, rejections_
