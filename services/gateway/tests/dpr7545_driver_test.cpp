@@ -63,22 +63,6 @@ class ViewTransport final : public d::Transport {
 /// under normal scheduling either could miss a 20 ms period and fault the exchange.
 constexpr int kRealtimePriority = 50;
 
-/// The calling thread at SCHED_FIFO for a scope (where permitted), then as before.
-class FifoScope {
- public:
-  explicit FifoScope(int priority) {
-    (void)pthread_getschedparam(pthread_self(), &policy_, &param_);
-    (void)set_thread_fifo(priority);
-  }
-  ~FifoScope() { (void)pthread_setschedparam(pthread_self(), policy_, &param_); }
-  FifoScope(const FifoScope&) = delete;
-  FifoScope& operator=(const FifoScope&) = delete;
-
- private:
-  int policy_ = SCHED_OTHER;
-  sched_param param_{};
-};
-
 class FakeSlave {
  public:
   explicit FakeSlave(std::span<std::byte> window) : dpr_(window) {
@@ -345,7 +329,7 @@ class Dpr7545DriverTest : public ::testing::Test {
     ASSERT_TRUE(cycle_until([&] { return !slave_.periods().empty(); })) << "no control mode";
   }
 
-  FifoScope fifo_;  // first: the master runs at SCHED_FIFO from its construction on
+  ScopedThreadFifo fifo_;  // first: the master runs at SCHED_FIFO from its construction on
   kinematics::RobotModel model_;
   std::unique_ptr<d::Transport> memory_;
   FakeSlave slave_;
