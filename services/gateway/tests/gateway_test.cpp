@@ -217,7 +217,27 @@ TEST(GatewaySupervisor, StopsTheRobotMovingOrAtRestWhenEverySupervisorIsLostAndS
   auto supervisor = process::Child::spawn(options);
   ASSERT_THAT(supervisor, ::cell::testing::IsOk());
   service::ServiceDirectory directory(client, "test");
-  ASSERT_THAT(directory.wait_settled(10s, {"task", "gateway"}), ::cell::testing::IsOk());
+  // Wait for the supervisor's heartbeat itself: a supervisor that never appeared is not lost
+  // (by design), so killing one the gateway has not seen yet proves nothing. wait_settled
+  // alone would return once the gateway's own heartbeat has been quiet for 300 ms, before a
+  // slow child (a sanitizer build on a loaded host) has started.
+  auto supervisor_serving = [&] {
+    return cell::testing::eventually(
+        [&] {
+          auto entries = directory.snapshot();
+          if (!entries) {
+            return false;
+          }
+          for (const service::ServiceEntry& e : *entries) {
+            if (e.service_id == "task" && !e.lost && e.state == cell_health_HEALTH_SERVING) {
+              return true;
+            }
+          }
+          return false;
+        },
+        20s);
+  };
+  ASSERT_TRUE(supervisor_serving()) << supervisor->output();
 
   auto home = command(cell_robot_CMD_HOME);
   ASSERT_THAT(home, ::cell::testing::IsOk());
@@ -308,20 +328,7 @@ TEST(GatewaySupervisor, StopsTheRobotMovingOrAtRestWhenEverySupervisorIsLostAndS
   // At rest: a supervisor comes back, and is lost again while nothing moves.
   auto second = process::Child::spawn(options);
   ASSERT_THAT(second, ::cell::testing::IsOk());
-  ASSERT_TRUE(cell::testing::eventually(
-      [&] {
-        auto entries = directory.snapshot();
-        if (!entries) {
-          return false;
-        }
-        for (const service::ServiceEntry& e : *entries) {
-          if (e.service_id == "task" && !e.lost && e.state == cell_health_HEALTH_SERVING) {
-            return true;
-          }
-        }
-        return false;
-      },
-      10s));
+  ASSERT_TRUE(supervisor_serving());
   std::this_thread::sleep_for(300ms);  // the gateway reads the heartbeats at 10 Hz
   auto resting = latest();
   ASSERT_TRUE(resting.has_value());
