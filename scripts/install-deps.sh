@@ -12,7 +12,7 @@ PACKAGES=(
   liborocos-kdl-dev libsqlite3-dev
   valgrind procps iproute2 openssl nftables util-linux systemd jq
   libcpp-httplib-dev chromium
-  clang-tidy python3
+  clang-tidy python3 lld
 )
 
 missing=()
