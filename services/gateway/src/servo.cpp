@@ -251,6 +251,11 @@ std::vector<ServoEvent> Servo::take_events() {
 void Servo::fault(std::uint32_t bits, const std::string& text) {
   executor_.stop();
   mode_ = cell_robot_MODE_FAULT;
+  {
+    // The fault's own text from now on, not the text of a stop it may have ended.
+    std::lock_guard lock(mutex_);
+    snapshot_.fault_text = text;
+  }
   event(cell_health_SEVERITY_ERROR, "robot.fault",
         fmt::format("robot '{}' faulted (bits 0x{:04x}): {}", model_.id(), bits, text));
 }
@@ -272,7 +277,16 @@ void Servo::apply_commands(
               fmt::format("robot '{}' stopped on command", model_.id()));
         break;
       case cell_robot_CMD_RESET:
-        status = driver_->command(DriverCommand::kReset, args);
+        // A reset clears a fault or a stop. The controller itself is reset only out of a fault
+        // (its error register, the Excalibur's restart and restore): a stop is the servo's own
+        // state, and a reset of a robot with neither is acknowledged and changes nothing (a
+        // stray or repeated RESET must not restart a healthy controller, nor halt a move).
+        if (mode_ != cell_robot_MODE_FAULT && mode_ != cell_robot_MODE_STOPPED) {
+          break;
+        }
+        if (mode_ == cell_robot_MODE_FAULT) {
+          status = driver_->command(DriverCommand::kReset, args);
+        }
         if (status) {
           // After a fault or stop the arm may rest elsewhere than the last setpoint (a move
           // not achieved, a drift, a servo board that let go): hold where it is, so the next

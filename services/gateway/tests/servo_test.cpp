@@ -1,5 +1,6 @@
 #include "servo.hpp"
 
+#include <algorithm>
 #include <numbers>
 
 #include <gmock/gmock.h>
@@ -341,6 +342,39 @@ TEST_F(ServoTest, ControllerFaultStopsMotionIsReportedAndCleared) {
   ASSERT_THAT(servo.post_command(cell_robot_CMD_RESET, {}), IsOk());
   servo.cycle(now_ += 1ms);
   EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_IDLE);
+  EXPECT_EQ(std::count(fake->commands.begin(), fake->commands.end(), DriverCommand::kReset), 1)
+      << "out of a fault, the controller is reset";
+}
+
+// A reset clears a fault or a stop; only a fault reaches the controller. A reset of a robot
+// that moves, or rests, with neither changes nothing (a stray or flooded RESET must neither
+// restart a healthy controller, the Excalibur's reboot, nor halt a move), and a reset after a
+// stop clears the servo's own state without restarting the controller.
+TEST_F(ServoTest, AResetReachesTheControllerOnlyOutOfAFault) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  auto driver = std::make_unique<FakeDriver>(q0);
+  FakeDriver* fake = driver.get();
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_RESET, {}), IsOk());
+  servo.cycle(now_ += 1ms);
+  EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_IDLE);
+  run_into_a_move(servo, q0, 0.2);
+  ASSERT_FALSE(HasFatalFailure());
+  const double before = servo.snapshot().progress;
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_RESET, {}), IsOk());
+  servo.cycle(now_ += 1ms);
+  servo.cycle(now_ += 1ms);
+  EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_MOVING) << "a reset does not halt a move";
+  EXPECT_GT(servo.snapshot().progress, before);
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_STOP, {}), IsOk());
+  servo.cycle(now_ += 1ms);
+  ASSERT_EQ(servo.snapshot().mode, cell_robot_MODE_STOPPED);
+  ASSERT_THAT(servo.post_command(cell_robot_CMD_RESET, {}), IsOk());
+  servo.cycle(now_ += 1ms);
+  EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_IDLE);
+  EXPECT_EQ(std::count(fake->commands.begin(), fake->commands.end(), DriverCommand::kReset), 0)
+      << "no fault: the controller was never reset";
 }
 
 // A fault mid-move, after which the arm rests elsewhere than its last setpoint (the 7545's
