@@ -241,6 +241,7 @@ Status Dpr7545Driver::on_activate() {
   } else {
     sim_clock_.reset();
   }
+  last_board_ns_ = 0;
   phase_ = Phase::kIdle;
   homed_ = false;  // the counters may not be homed: home before moving
   gripper_ = cell_robot_GRIPPER_UNKNOWN;
@@ -339,6 +340,7 @@ void Dpr7545Driver::fill_state(JointState& state) const noexcept {
   state.homed = homed_;
   state.busy = phase_ == Phase::kLeave || phase_ == Phase::kHoming || phase_ == Phase::kGripper;
   state.fault_bits = phase_ == Phase::kFault ? latched_bits_ : 0;
+  state.clock_advance_s = clock_advance_s_;
 }
 
 CycleStatus Dpr7545Driver::fault(std::uint32_t bits, JointState& state) noexcept {
@@ -433,9 +435,22 @@ void Dpr7545Driver::track_sample(std::int64_t seen, bool started_before) noexcep
   const std::int64_t previous = (fresh_engage_ ? 0 : last_sample_ns_);
   if (sim_clock_) {
     // A simulator says when it sampled (sim_control.hpp): its periods start with a process's
-    // scheduling jitter, which no grid tracks.
+    // scheduling jitter, which no grid tracks. It also says what its board's clock read then:
+    // the arm moved on that clock, one period per period, through the simulator's stalls and
+    // a late master's (which it absorbed, and counted); the path follows it.
     const std::int64_t t = sim_clock_->sample_time_ns();
     sample_ns_ = t > 0 && t <= seen ? t : seen;
+    const std::int64_t board = sim_clock_->board_time_ns();
+    if (board > 0) {
+      const std::int64_t gap =
+          !fresh_engage_ && last_board_ns_ > 0 && board > last_board_ns_ ? board - last_board_ns_
+                                                                          : period_ns_;
+      last_board_ns_ = board;
+      clock_advance_s_ = static_cast<double>(gap) * 1e-9;
+      sample_gap_ns_ = gap;
+      last_sample_ns_ = sample_ns_;
+      return;
+    }
   } else {
     // The board samples on its timer's grid, one exchange per period by construction (it
     // cannot start a period before the previous one's torques came, else it stops with 0x1000),
@@ -485,6 +500,9 @@ void Dpr7545Driver::start_procedure() noexcept {
 CycleStatus Dpr7545Driver::read(Clock::time_point now, JointState& state) {
   tighten_timer_slack();
   const std::int64_t start = now_ns();
+  // The board's clock has not moved for the host until an exchange says it has (a simulator
+  // that publishes it); the real card's is not visible.
+  clock_advance_s_ = sim_clock_ && sim_clock_->board_time_ns() > 0 ? 0.0 : -1.0;
   cycle_deadline_ns_ = start + budget_ns_;
   handshake_open_ = false;
   const bool may_engage = ready_to_engage(now);
@@ -631,10 +649,15 @@ CycleStatus Dpr7545Driver::write(Clock::time_point now, const JointSetpoint& set
   handshake_open_ = false;
   const bool sized = setpoint.q.size() == kJoints;
   const bool with_rate = setpoint.qd.size() == kJoints;
-  // The setpoint holds at `now` (the host's cycle time); move it to the sampling instant.
+  // The setpoint holds at `now` (the host's cycle time); move it to the sampling instant. On
+  // the board's clock (clock_advance_s_ >= 0) the host's path already stands at the sample's
+  // instant: it advanced by the board's clock, not the host's.
   const std::int64_t skew_ns =
-      sample_ns_ -
-      std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()).count();
+      clock_advance_s_ >= 0.0
+          ? 0
+          : sample_ns_ - std::chrono::duration_cast<std::chrono::nanoseconds>(
+                             now.time_since_epoch())
+                             .count();
   const std::int64_t bounded_skew = std::clamp(skew_ns, -5 * period_ns_, 5 * period_ns_);
   if (std::abs(bounded_skew) > max_skew_ns_.load(std::memory_order_relaxed)) {
     max_skew_ns_.store(std::abs(bounded_skew), std::memory_order_relaxed);
@@ -806,6 +829,7 @@ Status Dpr7545Driver::command(DriverCommand command, const CommandArgs& args) {
         } else {
           sim_clock_.reset();
         }
+        last_board_ns_ = 0;
         homed_ = false;
       }
       stop_control();

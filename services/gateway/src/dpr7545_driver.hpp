@@ -182,9 +182,16 @@ class Dpr7545Driver final : public RobotDriver {
   std::int64_t cycle_deadline_ns_ = 0;
   std::int64_t sample_ns_ = 0;       ///< when the slave sampled this period's positions
   std::int64_t last_sample_ns_ = 0;
-  std::int64_t sample_gap_ns_ = 0;  ///< sample_ns_ minus the previous exchange's [ns]
+  /// The board's clock between this exchange's sample and the previous one's [ns]: one
+  /// period on the board (and a simulator that publishes its clock), else the sampling
+  /// instants' gap on the host's clock.
+  std::int64_t sample_gap_ns_ = 0;
   /// A simulator's control block, which tells the sampling instants (empty on the real card).
   std::optional<dpr7545::SimControl> sim_clock_;
+  std::int64_t last_board_ns_ = 0;  ///< the simulator's board clock at the last sample (0: none)
+  /// JointState::clock_advance_s of this cycle: the board's clock since the previous cycle
+  /// (0 without an exchange), or -1 when the board's clock is not known (the real card).
+  double clock_advance_s_ = -1.0;
   bool handshake_open_ = false;
   bool fresh_engage_ = false;
   bool homed_ = false;

@@ -351,17 +351,7 @@ void Servo::apply_commands(
 
 void Servo::cycle(Clock::time_point now) {
   const double t = seconds(now);
-  // A late cycle (the host stalled, or the controller's handshake did): the path moves on at
-  // most max_setpoint_advance, the rest of the stall delays it (DriverInfo).
-  const double max_advance =
-      std::chrono::duration<double>(driver_->info().max_setpoint_advance).count();
-  if (max_advance > 0.0 && last_cycle_s_ >= 0.0 && t - last_cycle_s_ > max_advance) {
-    const double excess = t - last_cycle_s_ - max_advance;
-    executor_.delay(excess);
-    if (mode_ == cell_robot_MODE_MOVING) {
-      path_delay_s_ += excess;
-    }
-  }
+  const double host_gap_s = last_cycle_s_ >= 0.0 ? t - last_cycle_s_ : 0.0;
   last_cycle_s_ = t;
   Pending pending;
   {
@@ -379,6 +369,7 @@ void Servo::cycle(Clock::time_point now) {
       stop_text_ = std::move(pending.stop_text);
     }
   }
+  bool loaded = false;  // a path loaded now starts now: no earlier cycle's time is its own
   if (pending.plan && mode_ != cell_robot_MODE_FAULT && mode_ != cell_robot_MODE_STOPPED) {
     motion::Plan& plan = *pending.plan;
     events_ = std::move(plan.events);
@@ -388,6 +379,7 @@ void Servo::cycle(Clock::time_point now) {
     executor_.load(std::move(plan.trajectory), t, plan.alter_enabled,
                    {.cumulative = plan.alter_cumulative, .world_frame = plan.alter_world_frame});
     mode_ = cell_robot_MODE_MOVING;
+    loaded = true;
   }
   if (pending.alter && pending.alter_id == trajectory_id_) {
     trajectory::AlterCorrection c = *pending.alter;
@@ -403,10 +395,34 @@ void Servo::cycle(Clock::time_point now) {
   const CycleStatus read_status = driver_->read(now, measured_);
   if (read_status == CycleStatus::kFault && mode_ != cell_robot_MODE_FAULT) {
     fault(measured_.fault_bits, driver_->describe_faults(measured_.fault_bits));
-  } else if (read_status == CycleStatus::kRetry && ++retries_in_a_row_ > 3) {
+  } else if (read_status == CycleStatus::kRetry && ++retries_in_a_row_ > 3 &&
+             mode_ != cell_robot_MODE_FAULT) {  // one fault, not one a cycle while it lasts
     fault(0, "link to the controller failed 4 cycles in a row");
   } else if (read_status == CycleStatus::kOk) {
     retries_in_a_row_ = 0;
+  }
+
+  // Path time. The arm moved as long as the controller's clock advanced, when the driver can
+  // see it (a simulated 7545 board: through its own stalls and a late master's, which it
+  // absorbed, its clock and its arm stood still); the path advances exactly that much. Else the
+  // host's clock stands for it, but after a late cycle (the host stalled, or the controller's
+  // handshake did) the path moves on at most max_setpoint_advance; the rest of the stall
+  // delays it (DriverInfo).
+  if (!loaded && host_gap_s > 0.0) {
+    const double max_advance =
+        std::chrono::duration<double>(driver_->info().max_setpoint_advance).count();
+    double excess = 0.0;
+    if (measured_.clock_advance_s >= 0.0) {
+      excess = host_gap_s - measured_.clock_advance_s;
+    } else if (max_advance > 0.0 && host_gap_s > max_advance) {
+      excess = host_gap_s - max_advance;
+    }
+    if (excess != 0.0) {
+      executor_.delay(excess);
+      if (mode_ == cell_robot_MODE_MOVING) {
+        path_delay_s_ += excess;
+      }
+    }
   }
 
   // Next setpoint: the path where the arm is to hold it (the driver's setpoint lead ahead).

@@ -42,8 +42,10 @@ struct ServoSnapshot {
   std::int64_t stamp_ns = 0;
   double jitter_max_us = 0.0;
   std::uint64_t overruns = 0;
-  /// Path time given up to late cycles so far [s] (DriverInfo::max_setpoint_advance): how
-  /// much later than planned the moves ended because the host stalled.
+  /// Path time given up to late cycles so far [s]: how much later than planned the moves
+  /// ended because the host stalled (DriverInfo::max_setpoint_advance), or, where the driver
+  /// reads the controller's clock (JointState::clock_advance_s), because that clock fell
+  /// behind the host's (a simulated board absorbing stalls).
   double path_delay_s = 0.0;
 };
 

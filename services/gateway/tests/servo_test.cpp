@@ -45,6 +45,7 @@ class FakeDriver final : public RobotDriver {
     s.homed = true;
     s.gripper = gripper;
     s.fault_bits = fault_bits;
+    s.clock_advance_s = clock_advance_s;
     if (link_down) {
       return CycleStatus::kRetry;
     }
@@ -86,6 +87,7 @@ class FakeDriver final : public RobotDriver {
 
   std::uint32_t fault_bits = 0;
   bool link_down = false;
+  double clock_advance_s = -1.0;  ///< JointState::clock_advance_s reported by every read()
   cell_robot_GripperState gripper = cell_robot_GRIPPER_OPEN;
   std::vector<DriverCommand> commands;
   int writes = 0;
@@ -440,6 +442,44 @@ TEST_F(ServoTest, AStalledCycleDelaysThePathWhenTheControllerBoundsItsAdvance) {
     servo.cycle(now_ += 1ms);
     EXPECT_TRUE(servo.snapshot().measured.q.isApprox(plan->trajectory.end(), 1e-12));
   }
+}
+
+// A controller whose clock the driver reads (the simulated 7545 board): the path advances by
+// that clock, not the host's. A 20 ms host stall in which the board ran one period moves the
+// path 1 ms; a cycle without an exchange (0) holds it; jittered host cycles (0.7 ms, 1.3 ms)
+// still move it exactly one period each. The move ends where it was going.
+TEST_F(ServoTest, ThePathFollowsTheControllersClockWhenTheDriverReadsIt) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  auto driver = std::make_unique<FakeDriver>(q0);
+  FakeDriver* fake = driver.get();
+  fake->bound_advance(2ms);  // not used while the clock is known
+  fake->clock_advance_s = 0.001;
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  auto plan = planner_.move_joints(q0, jv({deg(90), deg(45), 200, 0}), 1.0);
+  ASSERT_THAT(plan, IsOk());
+  const double d = plan->trajectory.duration_s();
+  ASSERT_THAT(servo.post_trajectory(*plan, "t"), IsOk());
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& s) { return s.progress > 0.4; }, 10));
+  const auto path_s = [&] { return servo.snapshot().progress * d; };
+  double before_s = path_s();
+  servo.cycle(now_ += 20ms);
+  EXPECT_NEAR(path_s() - before_s, 0.001, 1e-9) << "a 20 ms stall, one board period";
+  EXPECT_NEAR(servo.snapshot().path_delay_s, 0.019, 1e-9);
+  before_s = path_s();
+  fake->clock_advance_s = 0.0;
+  servo.cycle(now_ += 1ms);
+  EXPECT_NEAR(path_s() - before_s, 0.0, 1e-9) << "no exchange, no board time";
+  fake->clock_advance_s = 0.001;
+  for (const auto gap : {700us, 1300us, 700us, 1300us}) {
+    before_s = path_s();
+    servo.cycle(now_ += gap);
+    EXPECT_NEAR(path_s() - before_s, 0.001, 1e-9) << "host gap " << gap.count() << " us";
+  }
+  EXPECT_TRUE(fake->last_written.isApprox(plan->trajectory.sample(path_s()).q, 1e-9));
+  ASSERT_TRUE(run_until(servo, [](const ServoSnapshot& x) { return !x.moving; }, 10));
+  servo.cycle(now_ += 1ms);
+  EXPECT_TRUE(servo.snapshot().measured.q.isApprox(plan->trajectory.end(), 1e-12));
 }
 
 TEST_F(ServoTest, LinkFailingFourCyclesInARowIsAFault) {

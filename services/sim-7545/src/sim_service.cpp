@@ -194,7 +194,9 @@ void SimService::run(service::Context& ctx) {
     if (s.stalls_absorbed != stalls_logged) {
       log::info("slave", "this process stalled inside a handshake wait; the deadline moved by "
                 "the stall",
-                {{"stalls_absorbed", std::to_string(s.stalls_absorbed)}});
+                {{"stalls_absorbed", std::to_string(s.stalls_absorbed)},
+                 {"late_served", std::to_string(s.late_served)},
+                 {"board_clock_behind_s", fmt::format("{:.3f}", s.absorbed_s)}});
       stalls_logged = s.stalls_absorbed;
     }
     ctx.health().tick();

@@ -85,6 +85,8 @@ void Slave::advance_to(std::int64_t t_ns) noexcept {
   t_phys_ns_ = t_ns;
 }
 
+std::int64_t Slave::board_now() const noexcept { return now_ns() - absorbed_ns_; }
+
 void Slave::zero_dacs() noexcept { dac_.fill(dpr7545::kTorqueZero); }
 
 void Slave::set_error_bits(std::uint16_t bits) noexcept {
@@ -216,6 +218,7 @@ void Slave::publish() noexcept {
   snapshot_.late_served = late_served_;
   snapshot_.stalls_absorbed = stalls_absorbed_;
   snapshot_.late_max_us = std::max(snapshot_.late_max_us, late_max_us_);
+  snapshot_.absorbed_s = static_cast<double>(absorbed_ns_) * 1e-9;
   late_max_us_ = 0.0;
 }
 
@@ -233,7 +236,7 @@ bool Slave::idle_wait(Done&& done) {
     if (stopping()) {
       return false;
     }
-    advance_to(now_ns());
+    advance_to(board_now());
     service_mailbox();
     publish();
     if (done()) {
@@ -250,7 +253,7 @@ void Slave::run(const std::atomic<bool>& stop) {
   // (done by the JointModels: they read 0 where the arm is at power-up), open the gripper.
   dpr_.set_error(0);
   gripper_closed_ = false;
-  t_phys_ns_ = now_ns();
+  t_phys_ns_ = board_now();
   while (!stopping()) {
     // main_loop
     dpr_.set_command(0);
@@ -268,7 +271,7 @@ void Slave::wait_for_command() {
     if (stopping()) {
       return;
     }
-    advance_to(now_ns());  // the arm moved with the DACs as they were until now
+    advance_to(board_now());  // the arm moved with the DACs as they were until now
     zero_dacs();
     get_robot_state();
     overrun_check();
@@ -317,7 +320,8 @@ std::int64_t Slave::absorb_own_stall(std::int64_t& last_look_ns, std::int64_t& d
 
 void Slave::control_mode() {
   std::int64_t grid = now_ns();  // CLR TIMER2
-  advance_to(grid);
+  std::int64_t board = board_now();
+  advance_to(board);
   dpr_.set_timing_a(0);  // clear the timing registers
   dpr_.set_timing_b(0);
   mode_ = SlaveMode::kControl;
@@ -329,12 +333,15 @@ void Slave::control_mode() {
       return;
     }
     const std::int64_t start = now_ns();
-    // The encoders are read now, when the period starts, and the instant is published in the
-    // simulator's control block: the master evaluates its setpoint at this instant, so this
-    // process's scheduling jitter does not turn into position error (the real board samples
-    // on its timer's exact grid, which the master tracks instead).
-    advance_to(start);
+    // The encoders are read now, when the period starts, after exactly one period of the
+    // board's clock under the torques of the last (the board's timer does not stall with this
+    // process, nor wait for a late master). The host's instant and the board's are published
+    // in the simulator's control block: the master's path follows the board's clock, so this
+    // process's scheduling does not turn into position error (the real board samples on its
+    // timer's exact grid, which the master tracks instead).
+    advance_to(board);
     control_.set_sample_time_ns(start);
+    control_.set_board_time_ns(board);
     late_max_us_ = std::max(late_max_us_, static_cast<double>(start - grid) * 1e-3);
     const std::int64_t period = period_ns();
     dpr_.set_timing_a(0x0001);  // signal master to begin its servo loop
@@ -427,10 +434,14 @@ void Slave::control_mode() {
     // more than a period behind, it skips the grid points it missed but stays on the grid, so
     // that the sampling instants remain t0 + k * period for the master.
     grid += period;
+    board += period;
     const std::int64_t now = now_ns();
     if (now > grid + period) {
       grid += (now - grid) / period * period;
     }
+    // The grid points skipped are time the board's clock never saw: however control mode
+    // ends, the clock goes on from here with the host's (board_now()).
+    absorbed_ns_ = grid - board;
     sleep_until_ns(grid);
   }
 }

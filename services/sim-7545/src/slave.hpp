@@ -49,6 +49,10 @@ struct SlaveSnapshot {
   std::uint64_t late_served = 0;
   std::uint64_t stalls_absorbed = 0;  ///< waits in which this process itself was not running
   double late_max_us = 0.0;           ///< worst lateness of a period start since the last take
+  /// How far the board's clock (the one the arm moves on) is behind the host's [s]: the time
+  /// of every stall and late master the simulator absorbed in control mode. 0 on a host that
+  /// kept every period.
+  double absorbed_s = 0.0;
 };
 
 /// The 80C196 slave program of Appendix C (`slave.a96`), run against a DPR window and four
@@ -67,10 +71,17 @@ struct SlaveSnapshot {
 /// The sample period is read from the DPR each period (a value below 100 us, or 0, is taken
 /// as 1000 us, the master's).
 ///
-/// Physics: the joints advance with real time, the DAC word held since torque_out (zero-order
-/// hold). In control mode the encoders are read when the period starts, and that instant is
-/// published in the control block (sim_control.hpp) for the master, since a process's periods
-/// start with its scheduling jitter, unlike the board's timer. run() runs on one thread; snapshot() may be called from any other.
+/// Physics: the joints advance on the board's clock, the DAC word held since torque_out
+/// (zero-order hold). Outside control mode that clock runs with the host's. In control mode it
+/// advances exactly one sample period per period, as the board's timer does: a period that
+/// started late (this process stalled) or whose master was late within the grace
+/// (deadline_slack_s) costs the arm no motion under held torques that the board would never
+/// have applied. The board would have flagged such a master; the simulator serves it and
+/// counts it (late_served, stalls_absorbed), and its clock falls behind the host's by the time
+/// absorbed (SlaveSnapshot::absorbed_s). The encoders are read when the period starts; that
+/// instant and the board's clock are published in the control block (sim_control.hpp) for the
+/// master, whose path follows the board's clock. run() runs on one thread; snapshot() may be
+/// called from any other.
 class Slave {
  public:
   /// `window`: kWindowSize bytes (transport.hpp), must outlive the Slave.
@@ -105,6 +116,8 @@ class Slave {
   void zero_dacs() noexcept;
   void delay();
   void advance_to(std::int64_t t_ns) noexcept;
+  /// The board's clock now, outside control mode (the host's, less the time absorbed).
+  std::int64_t board_now() const noexcept;
   void set_error_bits(std::uint16_t bits) noexcept;
   void service_mailbox() noexcept;
   void publish() noexcept;
@@ -124,7 +137,8 @@ class Slave {
   std::array<std::int16_t, dpr7545::kJoints> vel_{};
   std::array<std::uint16_t, dpr7545::kJoints> dac_{};
   std::array<std::uint64_t, dpr7545::kJoints> index_seen_{};
-  std::int64_t t_phys_ns_ = 0;
+  std::int64_t t_phys_ns_ = 0;  ///< the board's clock up to which the joints have moved
+  std::int64_t absorbed_ns_ = 0;  ///< the host's clock minus the board's (SlaveSnapshot)
   SlaveMode mode_ = SlaveMode::kIdle;
   bool homed_ = false;
   bool gripper_closed_ = false;

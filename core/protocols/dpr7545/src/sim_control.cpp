@@ -18,6 +18,7 @@ constexpr std::size_t kJoint = 0x14;
 constexpr std::size_t kValue = 0x18;
 constexpr std::size_t kResult = 0x1C;
 constexpr std::size_t kSampleTime = 0x20;  // 8 bytes, 8-aligned (the window is page-aligned)
+constexpr std::size_t kBoardTime = 0x28;   // 8 bytes
 
 struct Name {
   SimFault fault;
@@ -74,6 +75,16 @@ void SimControl::set_sample_time_ns(std::int64_t t) const noexcept {
 
 std::int64_t SimControl::sample_time_ns() const noexcept {
   return std::atomic_ref<std::int64_t>(*reinterpret_cast<std::int64_t*>(base_ + kSampleTime))
+      .load(std::memory_order_acquire);
+}
+
+void SimControl::set_board_time_ns(std::int64_t t) const noexcept {
+  std::atomic_ref<std::int64_t>(*reinterpret_cast<std::int64_t*>(base_ + kBoardTime))
+      .store(t, std::memory_order_release);
+}
+
+std::int64_t SimControl::board_time_ns() const noexcept {
+  return std::atomic_ref<std::int64_t>(*reinterpret_cast<std::int64_t*>(base_ + kBoardTime))
       .load(std::memory_order_acquire);
 }
 

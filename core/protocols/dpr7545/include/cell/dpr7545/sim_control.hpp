@@ -24,6 +24,11 @@
 ///   +0x18 value (signed, counts)      +0x1C result of the last request (0 = done)
 ///   +0x20 sampling instant of the current period, CLOCK_MONOTONIC ns (int64), written before
 ///         timing_A = 1
+///   +0x28 the board's clock at that sample, ns (int64), written before timing_A = 1: in
+///         control mode it advances exactly one sample period per period, as the board's
+///         timer does, whatever the simulator's scheduling. The simulated arm moves on this
+///         clock; a period the simulator absorbed (its own stall, or a master late within its
+///         grace) leaves the clock behind the host's by that much (services/sim-7545/README.md).
 /// A requester writes kind/joint/value, then increments the request sequence (release); the
 /// simulator takes it (acquire), acts, writes the result and sets the acknowledged sequence to
 /// the request's. One requester at a time (the mailbox has one slot).
@@ -93,6 +98,11 @@ class SimControl {
   void set_sample_time_ns(std::int64_t t) const noexcept;
   /// Master: that instant (acquire; read after timing_A & 2). 0 before the first period.
   std::int64_t sample_time_ns() const noexcept;
+  /// Simulator: the board's clock at that sample [ns] (store before timing_A = 1; release).
+  void set_board_time_ns(std::int64_t t) const noexcept;
+  /// Master: the board's clock at the current period's sample (acquire; read after
+  /// timing_A & 2). 0 before the first period, and from a simulator that does not write it.
+  std::int64_t board_time_ns() const noexcept;
 
  private:
   std::uint32_t load(std::size_t field) const noexcept;
