@@ -1,6 +1,8 @@
 // `cellctl robot ...`: commands to a robot's gateway (cell/robot/command, answered on
 // cell/robot/command_reply) and its latest state (cell/robot/state_latest).
+#include <algorithm>
 #include <memory>
+#include <optional>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -105,17 +107,45 @@ int state(Session& session, const RobotArgs& args) {
   bus::Topic<cell_robot_RobotState> topic(session.participant(), bus::topics::kRobotStateLatest);
   bus::Reader<cell_robot_RobotState> reader(session.participant(), topic,
                                             bus::topics::kRobotStateLatest);
-  const auto deadline = std::chrono::steady_clock::now() + session.timeout();
-  while (std::chrono::steady_clock::now() < deadline) {
+  // The robot's state, and its simulator's truth when one runs ("<robot>.sim", on the state
+  // stream: the simulated board counts the late periods its grace absorbed, which the gateway
+  // cannot see).
+  bus::Topic<cell_robot_RobotState> stream_topic(session.participant(), bus::topics::kRobotState);
+  bus::Reader<cell_robot_RobotState> stream(session.participant(), stream_topic,
+                                            bus::topics::kRobotState);
+  const std::string sim_id = args.robot + ".sim";
+  std::optional<bus::Owned<cell_robot_RobotState>> found;
+  std::optional<bus::Owned<cell_robot_RobotState>> sim;
+  auto deadline = std::chrono::steady_clock::now() + session.timeout();
+  while (std::chrono::steady_clock::now() < deadline && !(found && sim)) {
     reader.wait_for_data(std::chrono::milliseconds(100));
     auto batch = reader.take_copies(64);
     if (!batch) {
       return session.fail(batch.error().message);
     }
     for (auto& s : *batch) {
-      if (bus::str(s->robot_id) != args.robot) {
-        continue;
+      const std::string_view id = bus::str(s->robot_id);
+      if (id == args.robot) {
+        if (!found) {  // the simulator's truth may follow: wait a little for it
+          deadline = std::min(deadline, std::chrono::steady_clock::now() +
+                                            std::chrono::milliseconds(200));
+        }
+        found = std::move(s);
       }
+    }
+    auto streamed = stream.take_copies(64);
+    if (!streamed) {
+      return session.fail(streamed.error().message);
+    }
+    for (auto& s : *streamed) {
+      if (bus::str(s->robot_id) == sim_id) {
+        sim = std::move(s);
+      }
+    }
+  }
+  if (found) {
+    auto& s = *found;
+    {
       const auto q_in = bus::span(s->position_rad_or_mm);
       if (static_cast<int>(q_in.size()) != model->dof()) {
         return session.fail(fmt::format("robot '{}' reports {} joints, its config {}", args.robot,
@@ -136,7 +166,13 @@ int state(Session& session, const RobotArgs& args) {
                               {"tool", pose ? pose_json(*pose) : json()},
                               {"fault", std::string(bus::str(s->fault_text))},
                               {"trajectory_id", std::string(bus::str(s->trajectory_id))},
-                              {"cycle_jitter_max_us", s->cycle_jitter_max_us}}
+                              {"cycle_count", s->cycle_count},
+                              {"cycle_period_s", s->cycle_period_s},
+                              {"cycle_overruns", s->cycle_overruns},
+                              {"cycle_jitter_max_us", s->cycle_jitter_max_us},
+                              {"board", sim ? json{{"periods", (*sim)->cycle_count},
+                                                   {"late_periods", (*sim)->cycle_overruns}}
+                                            : json()}}
                              .dump(2)
                       << "\n";
       } else {
@@ -145,6 +181,16 @@ int state(Session& session, const RobotArgs& args) {
                                      s->homed ? ", homed" : ", not homed",
                                      s->moving ? ", moving" : "", gripper_name(s->gripper),
                                      joints_text(*model, q), pose ? pose_text(*pose) : "?");
+        session.out() << fmt::format(
+            "  servo  {} cycles of {:.1f} ms, {} late, worst wake-up {:.0f} us late\n",
+            s->cycle_count, s->cycle_period_s * 1e3, s->cycle_overruns, s->cycle_jitter_max_us);
+        if (sim) {
+          // A late period the board would have faulted on, served by the simulator's grace.
+          session.out() << fmt::format(
+              "  board  (simulated) {} periods, {} late (past the board's deadline: served "
+              "within the simulator's grace or flagged)\n",
+              (*sim)->cycle_count, (*sim)->cycle_overruns);
+        }
         if (s->fault_text != nullptr && *s->fault_text != '\0') {
           session.out() << "  fault  " << s->fault_text << "\n";
         }

@@ -131,6 +131,15 @@ TEST_F(CellctlMotionTest, HomeMoveAndReadTheState) {
   EXPECT_TRUE(state["homed"].get<bool>());
   EXPECT_NEAR(value_of(state["joints"], "j1"), 60.0, 1e-3);  // deg; the state may be a cycle old
   EXPECT_NEAR(value_of(state["joints"], "r"), 30.0, 1e-3);
+  // The servo's counters (the ideal gateway: cycles run, none late by its own clock); no
+  // simulated board here ("board" is null).
+  EXPECT_GT(state["cycle_count"].get<std::uint64_t>(), 100U);
+  EXPECT_NEAR(state["cycle_period_s"].get<double>(), 0.001, 1e-9);
+  EXPECT_TRUE(state["cycle_overruns"].is_number_unsigned());
+  EXPECT_TRUE(state["board"].is_null());
+  r = run({"robot", "state", "--robot", "ibm7545"});
+  ASSERT_EQ(r.code, kExitOk) << r.err;
+  EXPECT_THAT(r.out, ::testing::ContainsRegex("servo  [0-9]+ cycles of 1.0 ms, [0-9]+ late"));
 }
 
 TEST_F(CellctlMotionTest, RefusalsComeBackWithTheReason) {
