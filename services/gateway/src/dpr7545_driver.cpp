@@ -235,13 +235,7 @@ Status Dpr7545Driver::on_activate() {
   dpr_->write_lighting(lights_);  // the latch is write-only: start from a known state
   // A simulator's control block (sim_control.hpp) tells the sampling instants; on the real
   // card the window holds no such block (the ISA hole reads 0xFF).
-  const d::SimControl control(transport_->window());
-  if (control.valid()) {
-    sim_clock_.emplace(control);
-  } else {
-    sim_clock_.reset();
-  }
-  last_board_ns_ = 0;
+  adopt_window();
   phase_ = Phase::kIdle;
   homed_ = false;  // the counters may not be homed: home before moving
   gripper_ = cell_robot_GRIPPER_UNKNOWN;
@@ -255,6 +249,21 @@ Status Dpr7545Driver::on_activate() {
             {{"transport", transport_->describe()},
              {"sample_period_us", std::to_string(options_.sample_period_us)}});
   return ok_status();
+}
+
+void Dpr7545Driver::adopt_window() noexcept {
+  const d::SimControl control(transport_->window());
+  if (control.valid()) {
+    sim_clock_.emplace(control);
+  } else {
+    sim_clock_.reset();
+  }
+  last_board_ns_ = 0;
+  // A simulator that serves a late master within a grace is waited for as long: a period it
+  // did not start is its own stall (DriverInfo::link_retries), up to the grace.
+  const std::uint32_t grace_us = sim_clock_ ? sim_clock_->grace_us() : 0U;
+  info_.link_retries = std::max(
+      3, static_cast<int>(std::ceil(static_cast<double>(grace_us) / options_.sample_period_us)));
 }
 
 void Dpr7545Driver::stop_control() noexcept {
@@ -823,13 +832,7 @@ Status Dpr7545Driver::command(DriverCommand command, const CommandArgs& args) {
         transport_ = std::move(*t);
         dpr_ = std::make_unique<d::Dpr>(transport_->window());
         dpr_->set_sample_period_us(static_cast<std::uint16_t>(options_.sample_period_us));
-        const d::SimControl control(transport_->window());
-        if (control.valid()) {
-          sim_clock_.emplace(control);
-        } else {
-          sim_clock_.reset();
-        }
-        last_board_ns_ = 0;
+        adopt_window();
         homed_ = false;
       }
       stop_control();

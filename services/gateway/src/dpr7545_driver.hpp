@@ -159,6 +159,9 @@ class Dpr7545Driver final : public RobotDriver {
   void start_procedure() noexcept;
   Status begin_leave(Procedure next) noexcept;
   void stop_control() noexcept;
+  /// Reads the window's simulator control block, if any: its clocks (sim_clock_) and its
+  /// grace, which sets info_.link_retries. After the transport is (re)opened.
+  void adopt_window() noexcept;
 
   const kinematics::RobotModel& model_;
   Dpr7545Options options_;

@@ -82,6 +82,11 @@ struct DriverInfo {
   /// millisecond, its torque word overflowing near 30 counts of error) a 5 ms stall is a
   /// torque fault. Bounded, the path slows down through a stall and ends that much later.
   std::chrono::nanoseconds max_setpoint_advance{0};
+  /// Cycles in a row without an exchange before the link counts as failed (a fault). Three
+  /// for a controller with its own timer; a simulated 7545 board that serves a late master
+  /// within a grace is waited for as long (its own stalls: the host's scheduling, not a dead
+  /// board; its clock and its arm stand still meanwhile).
+  int link_retries = 3;
 };
 
 /// One controller: the 7545 servo board (DPR), the Excalibur (RS-232 ASCII), a simulator of

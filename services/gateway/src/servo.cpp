@@ -395,9 +395,10 @@ void Servo::cycle(Clock::time_point now) {
   const CycleStatus read_status = driver_->read(now, measured_);
   if (read_status == CycleStatus::kFault && mode_ != cell_robot_MODE_FAULT) {
     fault(measured_.fault_bits, driver_->describe_faults(measured_.fault_bits));
-  } else if (read_status == CycleStatus::kRetry && ++retries_in_a_row_ > 3 &&
+  } else if (read_status == CycleStatus::kRetry &&
+             ++retries_in_a_row_ > driver_->info().link_retries &&
              mode_ != cell_robot_MODE_FAULT) {  // one fault, not one a cycle while it lasts
-    fault(0, "link to the controller failed 4 cycles in a row");
+    fault(0, fmt::format("link to the controller failed {} cycles in a row", retries_in_a_row_));
   } else if (read_status == CycleStatus::kOk) {
     retries_in_a_row_ = 0;
   }

@@ -3,6 +3,8 @@
 // to misbehave. The test thread plays the gateway's servo thread (read, write, next period).
 #include "dpr7545_driver.hpp"
 
+#include <unistd.h>
+
 #include <atomic>
 #include <chrono>
 #include <mutex>
@@ -15,6 +17,7 @@
 
 #include "cell/common/realtime.hpp"
 #include "cell/dpr7545/codec.hpp"
+#include "cell/dpr7545/sim_control.hpp"
 #include "cell/kinematics/robot_config.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
@@ -361,6 +364,20 @@ TEST_F(Dpr7545DriverTest, StaysOutOfControlModeUntilHomedThenHomesAndServos) {
   EXPECT_EQ(driver_.counters().handshake_timeouts, 0U);
   // The measured joints are the slave's counts through counts_per_unit.
   EXPECT_NEAR(state_.q[0], -20.0 / model_.joints()[0].counts_per_unit, 1e-12);
+}
+
+// The card (no simulator's control block) is waited for 4 cycles; a simulator that serves a
+// late master within a grace is waited for as long (its own stalls): 20 periods' worth.
+TEST_F(Dpr7545DriverTest, ASimulatorsGraceSetsHowLongItsLinkIsWaitedFor) {
+  activate();
+  EXPECT_EQ(driver_.info().link_retries, 3);
+  driver_.on_deactivate();
+  driver_.on_cleanup();
+  const d::SimControl control(memory_->window());
+  control.initialise(static_cast<std::uint32_t>(::getpid()));
+  control.set_grace_us(20 * kPeriodUs);
+  activate();
+  EXPECT_EQ(driver_.info().link_retries, 20);
 }
 
 // The PD law of the thesis on every exchange, cross-checked from what the slave reported and

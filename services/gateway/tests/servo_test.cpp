@@ -61,6 +61,7 @@ class FakeDriver final : public RobotDriver {
   void rest_at(JointVector q) { q_ = std::move(q); }
   /// As the 7545's board: the setpoint moves at most `d` of path time a cycle.
   void bound_advance(std::chrono::nanoseconds d) { info_.max_setpoint_advance = d; }
+  void set_link_retries(int n) { info_.link_retries = n; }
   Status command(DriverCommand c, const CommandArgs&) override {
     commands.push_back(c);
     if (c == DriverCommand::kReset) {
@@ -495,6 +496,38 @@ TEST_F(ServoTest, LinkFailingFourCyclesInARowIsAFault) {
   }
   servo.cycle(now_ += 1ms);
   EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_FAULT);
+  EXPECT_EQ(servo.snapshot().fault_text, "link to the controller failed 4 cycles in a row");
+  // One fault while the link stays down, not one a cycle.
+  (void)servo.take_events();
+  for (int i = 0; i < 5; ++i) {
+    servo.cycle(now_ += 1ms);
+  }
+  EXPECT_TRUE(servo.take_events().empty());
+}
+
+// A driver that waits longer for its controller (a simulated 7545 board with a 20 ms grace
+// for a late master is waited for 20 cycles of its own stalls).
+TEST_F(ServoTest, TheDriverSaysHowManyCyclesWithoutAnExchangeItWaits) {
+  const JointVector q0 = jv({deg(45), deg(105), 0, 0});
+  auto driver = std::make_unique<FakeDriver>(q0);
+  FakeDriver* fake = driver.get();
+  fake->set_link_retries(20);
+  Servo servo(model_, std::move(driver), deg(0.5), 0.5);
+  ASSERT_THAT(servo.start(now_), IsOk());
+  fake->link_down = true;
+  for (int i = 0; i < 20; ++i) {
+    servo.cycle(now_ += 1ms);
+    ASSERT_NE(servo.snapshot().mode, cell_robot_MODE_FAULT) << "retry " << i;
+  }
+  fake->link_down = false;  // back within the grace: nothing happened
+  servo.cycle(now_ += 1ms);
+  EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_IDLE);
+  fake->link_down = true;
+  for (int i = 0; i < 21; ++i) {
+    servo.cycle(now_ += 1ms);
+  }
+  EXPECT_EQ(servo.snapshot().mode, cell_robot_MODE_FAULT);
+  EXPECT_EQ(servo.snapshot().fault_text, "link to the controller failed 21 cycles in a row");
 }
 
 TEST_F(ServoTest, PickClosesTheGripperAtTheBottom) {

@@ -254,6 +254,8 @@ void Slave::run(const std::atomic<bool>& stop) {
   dpr_.set_error(0);
   gripper_closed_ = false;
   t_phys_ns_ = board_now();
+  control_.set_grace_us(static_cast<std::uint32_t>(std::clamp(
+      options_.deadline_slack_s * 1e6, 0.0, static_cast<double>(UINT32_MAX))));
   while (!stopping()) {
     // main_loop
     dpr_.set_command(0);

@@ -271,6 +271,7 @@ TEST_F(SlackSlaveTest, TheArmMovesOnePeriodPerPeriodThroughALateMaster) {
     model.advance(torque, dt);  // the torque written in period k, held for one period
   }
   EXPECT_GT(positions_.back(), 100) << "the torque moved J1";
+  EXPECT_EQ(control_.grace_us(), 200000U) << "the grace, published for the master";
   const SlaveSnapshot s = slave_->take_snapshot();
   EXPECT_GE(s.late_served, 1U);
   // 100 ms late: the next period started 4 or 5 periods of 20 ms off the grid, which the

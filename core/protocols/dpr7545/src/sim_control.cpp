@@ -19,6 +19,7 @@ constexpr std::size_t kValue = 0x18;
 constexpr std::size_t kResult = 0x1C;
 constexpr std::size_t kSampleTime = 0x20;  // 8 bytes, 8-aligned (the window is page-aligned)
 constexpr std::size_t kBoardTime = 0x28;   // 8 bytes
+constexpr std::size_t kGrace = 0x30;       // 4 bytes
 
 struct Name {
   SimFault fault;
@@ -68,25 +69,27 @@ void SimControl::store(std::size_t field, std::uint32_t value) const noexcept {
       .store(value, std::memory_order_release);
 }
 
-void SimControl::set_sample_time_ns(std::int64_t t) const noexcept {
-  std::atomic_ref<std::int64_t>(*reinterpret_cast<std::int64_t*>(base_ + kSampleTime))
-      .store(t, std::memory_order_release);
-}
-
-std::int64_t SimControl::sample_time_ns() const noexcept {
-  return std::atomic_ref<std::int64_t>(*reinterpret_cast<std::int64_t*>(base_ + kSampleTime))
+std::int64_t SimControl::load64(std::size_t field) const noexcept {
+  return std::atomic_ref<std::int64_t>(*reinterpret_cast<std::int64_t*>(base_ + field))
       .load(std::memory_order_acquire);
 }
 
-void SimControl::set_board_time_ns(std::int64_t t) const noexcept {
-  std::atomic_ref<std::int64_t>(*reinterpret_cast<std::int64_t*>(base_ + kBoardTime))
-      .store(t, std::memory_order_release);
+void SimControl::store64(std::size_t field, std::int64_t value) const noexcept {
+  std::atomic_ref<std::int64_t>(*reinterpret_cast<std::int64_t*>(base_ + field))
+      .store(value, std::memory_order_release);
 }
 
-std::int64_t SimControl::board_time_ns() const noexcept {
-  return std::atomic_ref<std::int64_t>(*reinterpret_cast<std::int64_t*>(base_ + kBoardTime))
-      .load(std::memory_order_acquire);
-}
+void SimControl::set_sample_time_ns(std::int64_t t) const noexcept { store64(kSampleTime, t); }
+
+std::int64_t SimControl::sample_time_ns() const noexcept { return load64(kSampleTime); }
+
+void SimControl::set_board_time_ns(std::int64_t t) const noexcept { store64(kBoardTime, t); }
+
+std::int64_t SimControl::board_time_ns() const noexcept { return load64(kBoardTime); }
+
+void SimControl::set_grace_us(std::uint32_t us) const noexcept { store(kGrace, us); }
+
+std::uint32_t SimControl::grace_us() const noexcept { return load(kGrace); }
 
 void SimControl::initialise(std::uint32_t owner_pid) const noexcept {
   store(kOwner, owner_pid);

@@ -29,6 +29,9 @@
 ///         timer does, whatever the simulator's scheduling. The simulated arm moves on this
 ///         clock; a period the simulator absorbed (its own stall, or a master late within its
 ///         grace) leaves the clock behind the host's by that much (services/sim-7545/README.md).
+///   +0x30 the simulator's grace past each deadline, us (uint32; 0 = the board's own timing):
+///         how late a master it serves, and so how long a master may wait for it (its own
+///         stalls) before the link counts as lost
 /// A requester writes kind/joint/value, then increments the request sequence (release); the
 /// simulator takes it (acquire), acts, writes the result and sets the acknowledged sequence to
 /// the request's. One requester at a time (the mailbox has one slot).
@@ -103,10 +106,16 @@ class SimControl {
   /// Master: the board's clock at the current period's sample (acquire; read after
   /// timing_A & 2). 0 before the first period, and from a simulator that does not write it.
   std::int64_t board_time_ns() const noexcept;
+  /// Simulator: its grace past each deadline [us] (SimConfig::deadline_slack_us).
+  void set_grace_us(std::uint32_t us) const noexcept;
+  /// Master: that grace; 0 when none (the board's own timing, or an older simulator).
+  std::uint32_t grace_us() const noexcept;
 
  private:
   std::uint32_t load(std::size_t field) const noexcept;
   void store(std::size_t field, std::uint32_t value) const noexcept;
+  std::int64_t load64(std::size_t field) const noexcept;  ///< 8-aligned fields
+  void store64(std::size_t field, std::int64_t value) const noexcept;
 
   std::byte* base_;
 };
