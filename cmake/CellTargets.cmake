@@ -1,12 +1,64 @@
 # Helpers shared by every library, service and test (STYLE.md §10).
 
 # -Wno-maybe-uninitialized: g++ 12 reports false positives inside Eigen fixed-size temporaries.
-function(cell_set_warnings target)
+function(cell_warning_options target)
   target_compile_options(${target} PRIVATE
     $<$<COMPILE_LANGUAGE:CXX>:-Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wno-sign-conversion -Wno-missing-field-initializers
       -Wno-maybe-uninitialized>)
   if(CELL_WERROR)
     target_compile_options(${target} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:-Werror>)
+  endif()
+endfunction()
+
+# Precompiled headers (CELL_PCH). Half of a test batch's compile time was parsing the same
+# standard, Eigen, fmt, JSON and gtest headers again (gateway_test: 39 s, 12 s of it parsing and
+# 12 s of it the kernel mapping the parser's memory; 21 s with the header below precompiled).
+# Two headers are compiled once each and reused by every target (REUSE_FROM): one for the
+# libraries, services, clients and benchmarks, one with gtest and gmock for the unit tests
+# (gtest's GTEST_HAS_PTHREAD is defined only where gtest is linked, and g++ refuses a header
+# precompiled with a macro the user lacks). A target whose options make g++ refuse the shared
+# header fails the build (-Winvalid-pch with -Werror) instead of silently parsing it all again.
+# scripts/tidy.sh configures its own tree without them: clang cannot read g++'s .gch files.
+set(CELL_PCH_HEADERS
+    <algorithm> <array> <atomic> <chrono> <cmath> <cstdint> <cstdio> <cstdlib> <cstring>
+    <filesystem> <fstream> <functional> <map> <memory> <mutex> <numbers> <optional> <random>
+    <set> <sstream> <string> <string_view> <thread> <vector>
+    <Eigen/Geometry> <fmt/format.h> <nlohmann/json.hpp>)
+if(CELL_PCH)
+  # What the headers need, given to every target that uses them: the same include paths and
+  # the same definitions (fmt's FMT_SHARED) as where they were compiled.
+  add_library(cell_pch_deps INTERFACE)
+  target_link_libraries(cell_pch_deps INTERFACE Eigen3::Eigen fmt::fmt
+                        nlohmann_json::nlohmann_json)
+  add_library(cell_pch_lib STATIC ${PROJECT_SOURCE_DIR}/cmake/pch_anchor.cpp)
+  target_link_libraries(cell_pch_lib PRIVATE cell_pch_deps)
+  target_compile_features(cell_pch_lib PRIVATE cxx_std_20)
+  cell_warning_options(cell_pch_lib)
+  target_precompile_headers(cell_pch_lib PRIVATE ${CELL_PCH_HEADERS})
+  if(BUILD_TESTING)
+    add_library(cell_pch_test STATIC ${PROJECT_SOURCE_DIR}/cmake/pch_anchor.cpp)
+    target_link_libraries(cell_pch_test PRIVATE cell_pch_deps GTest::gmock)
+    target_compile_features(cell_pch_test PRIVATE cxx_std_20)
+    cell_warning_options(cell_pch_test)
+    # The tests' own code is compiled at -O1 (cell_add_test): so is their header.
+    target_compile_options(cell_pch_test PRIVATE $<$<CONFIG:RelWithDebInfo,Release>:-O1>)
+    target_precompile_headers(cell_pch_test PRIVATE ${CELL_PCH_HEADERS} <gtest/gtest.h>
+                              <gmock/gmock.h>)
+  endif()
+endif()
+
+# cell_set_warnings(<target> [TEST]): the project's warnings and its precompiled header (the
+# unit tests' with TEST). Every C++ target of the project calls it.
+function(cell_set_warnings target)
+  cmake_parse_arguments(ARG "TEST" "" "" ${ARGN})
+  cell_warning_options(${target})
+  if(CELL_PCH)
+    target_link_libraries(${target} PRIVATE cell_pch_deps)
+    if(ARG_TEST)
+      target_precompile_headers(${target} REUSE_FROM cell_pch_test)
+    else()
+      target_precompile_headers(${target} REUSE_FROM cell_pch_lib)
+    endif()
   endif()
 endfunction()
 
@@ -48,7 +100,7 @@ function(cell_add_test name)
                         ${ARGN})
   add_executable(${name}_test ${ARG_SOURCES})
   target_link_libraries(${name}_test PRIVATE ${ARG_DEPENDS} GTest::gmock_main)
-  cell_set_warnings(${name}_test)
+  cell_set_warnings(${name}_test TEST)
   # The test's own code at -O1: it sets up and checks, the libraries it tests do the work (and
   # keep the build type's -O2). Half the build is test code; this cuts its compile by a fifth.
   target_compile_options(${name}_test PRIVATE $<$<CONFIG:RelWithDebInfo,Release>:-O1>)

@@ -3,10 +3,11 @@
 # the project (core, services, clients, tests, bench), two at a time per core. Any finding fails
 # (.clang-tidy: WarningsAsErrors '*'); each is printed as file:line:col: warning: ... [check].
 #
-# It reads the compile commands of the normal build (./build, as scripts/build.sh configures
-# it). There each target's sources are compiled in batches (CELL_UNITY_BUILD), so clang-tidy
-# parses the heavy headers once per batch instead of once per file; a source's findings are
-# reported once, under its own path. Only the generated IDL headers must exist, not the build.
+# It reads the compile commands of a tree of its own (./build-tidy: the normal build's
+# configure, without precompiled headers, which clang cannot read from g++). There each
+# target's sources are compiled in batches (CELL_UNITY_BUILD), so clang-tidy parses the heavy
+# headers once per batch instead of once per file; a source's findings are reported once, under
+# its own path. Only the generated IDL headers are built there, not the project.
 #
 #   scripts/tidy.sh                 # everything
 #   scripts/tidy.sh core/vision     # the batches holding sources whose path matches (a regex)
@@ -14,9 +15,10 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 "$root/scripts/install-deps.sh"
-build="${CELL_BUILD_DIR:-$root/build}"
+build="${CELL_TIDY_BUILD_DIR:-$root/build-tidy}"
 if [ ! -f "$build/build.ninja" ]; then
-  cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCELL_WERROR=ON
+  cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCELL_WERROR=ON \
+    -DCELL_PCH=OFF >/dev/null
 fi
 cmake --build "$build" --target cell_idl >/dev/null
 

@@ -49,7 +49,7 @@ const CompiledProgram& appendix_v() {
 
 const std::vector<Reading>& readings() {
   static const std::vector<Reading> r =
-      *load_readings(std::string(CELL_SOURCE_DIR) + "/config/rapt/appendix_v_readings.yaml");
+      *load_readings(CELL_SOURCE_DIR "/config/rapt/appendix_v_readings.yaml");
   return r;
 }
 
