@@ -148,7 +148,7 @@ Status ExcaliburDriver::on_activate() {
         continue;
       }
     }
-    ok = restore(why);
+    ok = restore(why, /*patient=*/true);
     if (ok) {
       Exchange e = exchange_once(pe::Command{}, pe::MessageKind::kJoints);
       ok = e.outcome == Outcome::kOk;
@@ -380,6 +380,8 @@ ExcaliburDriverStats ExcaliburDriver::stats() const {
   s.line_errors = line_errors_;
   s.recoveries = recoveries_;
   s.escalations = escalations_;
+  s.late_replies = late_replies_;
+  s.worst_reply_s = worst_reply_s_.load(std::memory_order_relaxed);
   s.moves_sent = moves_sent_;
   s.targets_done = targets_done_;
   s.targets_failed = targets_failed_;
@@ -390,7 +392,8 @@ ExcaliburDriverStats ExcaliburDriver::stats() const {
 // --- the I/O thread: exchanges ---------------------------------------------------------------
 
 ExcaliburDriver::Exchange ExcaliburDriver::exchange_once(const pe::Command& command,
-                                                         pe::MessageKind expected) {
+                                                         pe::MessageKind expected,
+                                                         bool patient) {
   Exchange e;
   if (stopping()) {
     e.outcome = Outcome::kStopped;
@@ -410,7 +413,20 @@ ExcaliburDriver::Exchange ExcaliburDriver::exchange_once(const pe::Command& comm
     e.error = s.error().message;
     return e;
   }
+  const Clock::time_point sent = Clock::now();
   auto reply = port_->wait_reply(seconds(reply_timeout_s_));
+  if (!reply && reply.error().code == Errc::kTimeout && patient && options_.host_latency_s > 0) {
+    reply = port_->wait_reply(seconds(options_.host_latency_s));
+    if (reply) {
+      note_late_reply(name, std::chrono::duration<double>(Clock::now() - sent).count());
+    }
+  }
+  if (reply) {
+    const double waited = std::chrono::duration<double>(Clock::now() - sent).count();
+    if (waited > worst_reply_s_.load(std::memory_order_relaxed)) {
+      worst_reply_s_.store(waited, std::memory_order_relaxed);
+    }
+  }
   if (!reply) {
     e.outcome = Outcome::kLineError;
     e.error = fmt::format("{} ({})", reply.error().message, name);
@@ -445,6 +461,23 @@ ExcaliburDriver::Exchange ExcaliburDriver::exchange_once(const pe::Command& comm
   ++exchanges_;
   e.message = *message;
   return e;
+}
+
+void ExcaliburDriver::note_late_reply(std::string_view command, double waited_s) {
+  const std::uint64_t late = late_replies_.fetch_add(1, std::memory_order_relaxed) + 1;
+  // One warning per 5 s at most, with the count since the last: a loaded host makes many.
+  const Clock::time_point now = Clock::now();
+  if (late_logged_ != 0 && now - late_logged_at_ < std::chrono::seconds(5)) {
+    return;
+  }
+  log::warn("late_reply",
+            fmt::format("the controller's reply to {} came {:.0f} ms after the command, past its "
+                        "reply time of {:.0f} ms (the host delivered it late); taken",
+                        command, waited_s * 1e3, reply_timeout_s_ * 1e3),
+            {{"late_replies", std::to_string(late)},
+             {"since_last_warning", std::to_string(late - late_logged_)}});
+  late_logged_ = late;
+  late_logged_at_ = now;
 }
 
 ExcaliburDriver::Exchange ExcaliburDriver::transact(const pe::Command& command,
@@ -489,16 +522,16 @@ bool ExcaliburDriver::reset_and_restore(std::string& why) {
   (void)port_->write_line(dialect_->framing().host_terminator);
   (void)port_->wait_reply(seconds(std::min(reply_timeout_s_, 0.1)));
   port_->discard_replies();
-  return restore(why);
+  return restore(why, /*patient=*/false);
 }
 
-bool ExcaliburDriver::restore(std::string& why) {
+bool ExcaliburDriver::restore(std::string& why, bool patient) {
   // Each step may meet a line error of its own: it is repeated a few times before the whole
   // restore counts as failed (and the caller resets the port again).
   constexpr int kTriesPerStep = 3;
   const auto step = [&](const pe::Command& c) {
     for (int i = 0; i < kTriesPerStep; ++i) {
-      Exchange e = exchange_once(c, pe::MessageKind::kOk);
+      Exchange e = exchange_once(c, pe::MessageKind::kOk, patient);
       if (e.outcome == Outcome::kOk) {
         return true;
       }
@@ -827,7 +860,7 @@ void ExcaliburDriver::run_queued() {
         final_sent_ = false;
         bool ok = false;
         for (int attempt = 0; attempt <= options_.max_attempts && !ok && !stopping(); ++attempt) {
-          ok = link_down_ ? reset_and_restore(why) : restore(why);
+          ok = link_down_ ? reset_and_restore(why) : restore(why, /*patient=*/true);
           link_down_ = link_down_ && !ok;
           if (!ok) {
             link_down_ = true;  // the next attempt starts with a port reset
@@ -985,6 +1018,7 @@ DriverFactory parse_excalibur_driver(config::MapReader& section) {
   section.optional("gripper_time_s", o.gripper_time_s);
   section.optional("mode", mode);
   section.optional("realtime_priority", o.realtime_priority);
+  section.optional("host_latency_s", o.host_latency_s);
   if (o.realtime_priority < 0 || o.realtime_priority > 99) {
     section.fail("realtime_priority",
                  fmt::format("must be 0 (none) or a SCHED_FIFO priority 1..99, got {}",
@@ -1007,6 +1041,7 @@ DriverFactory parse_excalibur_driver(config::MapReader& section) {
   range("stream_min_step_deg", o.stream_min_step_deg, 0.0, 90.0);
   range("settle_deg", o.settle_deg, 0.0, 10.0);
   range("gripper_time_s", o.gripper_time_s, 0.0, 10.0);
+  range("host_latency_s", o.host_latency_s, 0.0, 10.0);
   if (tolerance_deg != 0.0) {
     range("tolerance_deg", tolerance_deg, 0.001, 90.0);
   }

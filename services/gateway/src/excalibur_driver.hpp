@@ -53,6 +53,14 @@ struct ExcaliburDriverOptions {
   /// character, and the port's reader); 0: normal scheduling. On a loaded host a normal thread
   /// can be held off long enough that a reply misses its timeout and the link counts as lost.
   int realtime_priority = 0;
+  /// How long past its reply time (the dialect's reply time plus the line's byte times) a reply
+  /// is still waited for before the exchange counts as a line error. The host's kernel passes
+  /// every line, of a serial port as of a pty, through a worker thread at normal priority: on a
+  /// loaded host it arrives late, and a port reset for a reply that was only late cuts the next
+  /// lines and desynchronises replies (a stale "ok" for a query). A late reply is taken and
+  /// counted (stats().late_replies, a warning in the log). Not during a restore after a line
+  /// error: there the reply time alone decides, so a dead link is still found within seconds.
+  double host_latency_s = 1.0;
 };
 
 /// Fault bits of the Excalibur driver (JointState::fault_bits).
@@ -74,6 +82,8 @@ struct ExcaliburDriverStats {
   std::uint64_t targets_done = 0;    ///< final targets confirmed in position
   std::uint64_t targets_failed = 0;  ///< final targets reported failed
   std::uint64_t resyncs = 0;         ///< reported state snapped to the queried angles
+  std::uint64_t late_replies = 0;    ///< replies after their reply time, within host_latency_s
+  double worst_reply_s = 0.0;        ///< the longest wait for a reply taken (write to reply)
 };
 
 /// The RSI Excalibur on its RS-232 ASCII link (digest 001 §1-2), in the dialect of
@@ -168,14 +178,20 @@ class ExcaliburDriver final : public RobotDriver {
   };
 
   void io_loop();
+  /// One command and its reply. `patient`: a reply late by up to host_latency_s is taken
+  /// (every exchange but a restore's).
   Exchange exchange_once(const protocols::excalibur::Command& command,
-                         protocols::excalibur::MessageKind expected);
+                         protocols::excalibur::MessageKind expected, bool patient = true);
+  void note_late_reply(std::string_view command, double waited_s);
   /// exchange_once, and on a line error: port reset + restore + retry, up to max_attempts,
   /// then escalate.
   Exchange transact(const protocols::excalibur::Command& command,
                     protocols::excalibur::MessageKind expected);
   bool reset_and_restore(std::string& why);
-  bool restore(std::string& why);
+  /// The controller's state after a reset (mode, tolerance, timeout, the move under way).
+  /// `patient`: its replies may be late by host_latency_s (on activation; not after a line
+  /// error, where a dead link must be found within seconds).
+  bool restore(std::string& why, bool patient);
   void escalate(const std::string& why);
   /// Reports a failure: fault bit and text, busy off, the target never re-sent. `resync`: query
   /// the angles and report them; `hold`: then command the arm to stay there.
@@ -235,6 +251,10 @@ class ExcaliburDriver final : public RobotDriver {
   std::atomic<std::uint64_t> targets_done_{0};
   std::atomic<std::uint64_t> targets_failed_{0};
   std::atomic<std::uint64_t> resyncs_{0};
+  std::atomic<std::uint64_t> late_replies_{0};
+  std::atomic<double> worst_reply_s_{0.0};
+  std::uint64_t late_logged_ = 0;        ///< late_replies_ at the last warning (io thread)
+  Clock::time_point late_logged_at_{};  ///< the last warning about late replies (io thread)
 };
 
 /// `driver: {kind: excalibur, device: run/excalibur.pty, dialect:

@@ -307,6 +307,41 @@ TEST_F(ExcaliburDriverTest, RecoversFromLineNoiseByItself) {
   EXPECT_EQ(stats.escalations, 0U);
 }
 
+// A loaded host delivers a pty's (or a serial port's) lines late: a reply late by less than
+// host_latency_s is taken and counted, with no port reset (a reset for a reply that was only
+// late cut the next lines and desynchronised the replies: badinput's flood, 2 runs of 3).
+TEST_F(ExcaliburDriverTest, AReplyLatePastItsReplyTimeIsTakenAndCountedWithinTheHostsLatency) {
+  start();
+  const auto before = driver_->stats();
+  // The reply time here: the dialect's 150 ms and the line's bytes at 115200 baud.
+  sim_->set_reply_delay(0.35);
+  for (int i = 0; i < 3; ++i) {
+    const JointVector target = deg({4.0 * (i + 1), 30, -150, 0, 0, 0});
+    ASSERT_TRUE(move_to(target, 20s)) << i;
+    ASSERT_EQ(status_, CycleStatus::kOk) << driver_->describe_faults(state_.fault_bits);
+    EXPECT_LE((sim_angles() - target).cwiseAbs().maxCoeff(), 1.0 * kDeg) << i;
+  }
+  const auto stats = driver_->stats();
+  EXPECT_GT(stats.late_replies, before.late_replies);
+  EXPECT_EQ(stats.line_errors, before.line_errors);
+  EXPECT_EQ(stats.recoveries, before.recoveries);
+  EXPECT_GE(stats.worst_reply_s, 0.35);
+  EXPECT_LT(stats.worst_reply_s, 0.15 + 1.0 + 0.5);  // the reply time and host_latency_s, + slack
+}
+
+TEST_F(ExcaliburDriverTest, WithNoHostLatencyALateReplyIsALineError) {
+  start_sim(controller(model_, deg({0, 30, -150, 0, 0, 0})));
+  ExcaliburDriverOptions o = options();
+  o.host_latency_s = 0.0;
+  start_driver(o);
+  sim_->set_reply_delay(0.35);
+  ASSERT_TRUE(move_to(deg({6, 30, -150, 0, 0, 0}), 30s));
+  EXPECT_EQ(status_, CycleStatus::kFault);
+  EXPECT_EQ(state_.fault_bits & kFaultLink, kFaultLink);
+  EXPECT_EQ(driver_->stats().late_replies, 0U);
+  EXPECT_GT(driver_->stats().line_errors, 0U);
+}
+
 TEST_F(ExcaliburDriverTest, PersistentLineErrorsBecomeAnOperatorFaultThatResetClears) {
   start();
   ASSERT_THAT(sim_->set_noise(pe::NoiseSettings{1.0, 0.0}), IsOk());

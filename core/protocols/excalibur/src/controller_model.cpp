@@ -82,6 +82,10 @@ void ControllerModel::set_move_not_achieved_probability(double p) noexcept {
   settings_.move_not_achieved_probability = std::clamp(p, 0.0, 1.0);
 }
 
+void ControllerModel::set_reply_delay(double seconds) noexcept {
+  settings_.reply_delay_s = std::clamp(seconds, 0.0, 9.999);
+}
+
 // --- motion ----------------------------------------------------------------------------------
 
 ControllerAngles ControllerModel::position(const Segment& s, double t) noexcept {

@@ -191,6 +191,11 @@ NoiseSettings SimulatedController::noise() const {
   return noise_;
 }
 
+void SimulatedController::set_reply_delay(double seconds) {
+  std::lock_guard lock(mutex_);
+  model_.set_reply_delay(seconds);
+}
+
 void SimulatedController::set_move_not_achieved_probability(double p) {
   std::lock_guard lock(mutex_);
   model_.set_move_not_achieved_probability(p);

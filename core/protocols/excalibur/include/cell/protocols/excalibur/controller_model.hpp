@@ -125,6 +125,9 @@ class ControllerModel {
 
   void set_noise(const NoiseSettings& noise) noexcept;
   void set_move_not_achieved_probability(double p) noexcept;
+  /// The time every later reply leaves after its command (clamped to [0, 10) s): a slow
+  /// controller, or a host that delivers its lines late.
+  void set_reply_delay(double seconds) noexcept;
   const ControllerSettings& settings() const noexcept { return settings_; }
   const Dialect& dialect() const noexcept { return dialect_; }
 

@@ -61,6 +61,8 @@ class SimulatedController {
   Status set_noise(const NoiseSettings& noise);
   NoiseSettings noise() const;
   void set_move_not_achieved_probability(double p);
+  /// See ControllerModel::set_reply_delay.
+  void set_reply_delay(double seconds);
   /// Lines the controller answered with an error since the last call, each with the reason
   /// (for the simulator's log).
   std::vector<std::string> take_rejections();
