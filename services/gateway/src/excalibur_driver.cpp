@@ -531,7 +531,10 @@ bool ExcaliburDriver::restore(std::string& why, bool patient) {
   constexpr int kTriesPerStep = 3;
   const auto step = [&](const pe::Command& c) {
     for (int i = 0; i < kTriesPerStep; ++i) {
-      Exchange e = exchange_once(c, pe::MessageKind::kOk, patient);
+      // The first try waits for a late reply: a host stall that made the exchange before a
+      // line error may still be delaying this one. The later tries do not, so a dead link is
+      // found within seconds.
+      Exchange e = exchange_once(c, pe::MessageKind::kOk, patient || i == 0);
       if (e.outcome == Outcome::kOk) {
         return true;
       }

@@ -58,8 +58,8 @@ struct ExcaliburDriverOptions {
   /// every line, of a serial port as of a pty, through a worker thread at normal priority: on a
   /// loaded host it arrives late, and a port reset for a reply that was only late cuts the next
   /// lines and desynchronises replies (a stale "ok" for a query). A late reply is taken and
-  /// counted (stats().late_replies, a warning in the log). Not during a restore after a line
-  /// error: there the reply time alone decides, so a dead link is still found within seconds.
+  /// counted (stats().late_replies, a warning in the log). In a restore after a line error only
+  /// each step's first try waits so long, so a dead link is still found within seconds.
   double host_latency_s = 1.0;
 };
 
@@ -189,8 +189,9 @@ class ExcaliburDriver final : public RobotDriver {
                     protocols::excalibur::MessageKind expected);
   bool reset_and_restore(std::string& why);
   /// The controller's state after a reset (mode, tolerance, timeout, the move under way).
-  /// `patient`: its replies may be late by host_latency_s (on activation; not after a line
-  /// error, where a dead link must be found within seconds).
+  /// `patient`: its replies may be late by host_latency_s (on activation and RESET); else only
+  /// each step's first try waits for a late reply (after a line error, where a dead link must
+  /// be found within seconds).
   bool restore(std::string& why, bool patient);
   void escalate(const std::string& why);
   /// Reports a failure: fault bit and text, busy off, the target never re-sent. `resync`: query

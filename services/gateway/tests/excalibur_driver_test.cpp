@@ -323,8 +323,10 @@ TEST_F(ExcaliburDriverTest, AReplyLatePastItsReplyTimeIsTakenAndCountedWithinThe
   }
   const auto stats = driver_->stats();
   EXPECT_GT(stats.late_replies, before.late_replies);
-  EXPECT_EQ(stats.line_errors, before.line_errors);
-  EXPECT_EQ(stats.recoveries, before.recoveries);
+  // Normally no line error at all. A host stall longer than host_latency_s is a real one: it
+  // is recovered from (the restore's first tries wait for the late controller), never escalated.
+  EXPECT_EQ(stats.line_errors - before.line_errors, stats.recoveries - before.recoveries);
+  EXPECT_EQ(stats.escalations, before.escalations);
   EXPECT_GE(stats.worst_reply_s, 0.35);
   EXPECT_LT(stats.worst_reply_s, 0.15 + 1.0 + 0.5);  // the reply time and host_latency_s, + slack
 }
