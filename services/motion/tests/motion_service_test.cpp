@@ -64,6 +64,18 @@ class MotionServiceTest : public ::testing::Test {
     home.kind = cell_robot_CMD_HOME;
     auto r = commands_.call(home, 5s);
     EXPECT_TRUE(r && (*r)->status.accepted);
+    // HOME is accepted before it is done: wait until the robot says it is homed (a loaded host
+    // ran a move before, which the gateway rightly refused: "robot is not homed").
+    EXPECT_TRUE(cell::testing::eventually(
+        [&] {
+          states_.wait_for_data(100ms);
+          bool homed = false;
+          for (auto& s : *states_.take_copies(64)) {
+            homed = s->homed;
+          }
+          return homed;
+        },
+        10s));
     // The motion service plans only from a fresh robot state: wait until a preview stops
     // being refused for want of one.
     EXPECT_TRUE(cell::testing::eventually(
