@@ -415,14 +415,16 @@ ExcaliburDriver::Exchange ExcaliburDriver::exchange_once(const pe::Command& comm
   }
   const Clock::time_point sent = Clock::now();
   auto reply = port_->wait_reply(seconds(reply_timeout_s_));
+  bool late = false;
   if (!reply && reply.error().code == Errc::kTimeout && patient && options_.host_latency_s > 0) {
     reply = port_->wait_reply(seconds(options_.host_latency_s));
-    if (reply) {
-      note_late_reply(name, std::chrono::duration<double>(Clock::now() - sent).count());
-    }
+    late = true;
   }
   if (reply) {
     const double waited = std::chrono::duration<double>(Clock::now() - sent).count();
+    if (late) {
+      note_late_reply(name, waited);
+    }
     if (waited > worst_reply_s_.load(std::memory_order_relaxed)) {
       worst_reply_s_.store(waited, std::memory_order_relaxed);
     }
