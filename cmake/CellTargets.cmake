@@ -10,6 +10,18 @@ function(cell_warning_options target)
   endif()
 endfunction()
 
+# The unit tests' own code: -O1 in an optimised build; it sets up and checks, the libraries it
+# tests do the work (and keep the build type's -O2). Half the build is test code; -O1 cuts its
+# compile by a fifth. In the sanitizer build (CELL_SANITIZE: libraries and services at -O1) the
+# test code is compiled at -O0: ASan and UBSan instrument it all the same, nothing of it is
+# optimised away from them, and the instrumented compile of a test batch takes 35 s instead of
+# 60 (gateway_test, measured), which is a fifth of the sanitizer build.
+if(CELL_SANITIZE)
+  set(CELL_TEST_CODE_OPT -O0)
+else()
+  set(CELL_TEST_CODE_OPT $<$<CONFIG:RelWithDebInfo,Release>:-O1>)
+endif()
+
 # Precompiled headers (CELL_PCH). Half of a test batch's compile time was parsing the same
 # standard, Eigen, fmt, JSON and gtest headers again (gateway_test: 39 s, 12 s of it parsing and
 # 12 s of it the kernel mapping the parser's memory; 21 s with the header below precompiled).
@@ -40,8 +52,8 @@ if(CELL_PCH)
     target_link_libraries(cell_pch_test PRIVATE cell_pch_deps GTest::gmock)
     target_compile_features(cell_pch_test PRIVATE cxx_std_20)
     cell_warning_options(cell_pch_test)
-    # The tests' own code is compiled at -O1 (cell_add_test): so is their header.
-    target_compile_options(cell_pch_test PRIVATE $<$<CONFIG:RelWithDebInfo,Release>:-O1>)
+    # Compiled as the tests' own code is (CELL_TEST_CODE_OPT, cell_add_test).
+    target_compile_options(cell_pch_test PRIVATE ${CELL_TEST_CODE_OPT})
     target_precompile_headers(cell_pch_test PRIVATE ${CELL_PCH_HEADERS} <gtest/gtest.h>
                               <gmock/gmock.h>)
   endif()
@@ -101,9 +113,7 @@ function(cell_add_test name)
   add_executable(${name}_test ${ARG_SOURCES})
   target_link_libraries(${name}_test PRIVATE ${ARG_DEPENDS} GTest::gmock_main)
   cell_set_warnings(${name}_test TEST)
-  # The test's own code at -O1: it sets up and checks, the libraries it tests do the work (and
-  # keep the build type's -O2). Half the build is test code; this cuts its compile by a fifth.
-  target_compile_options(${name}_test PRIVATE $<$<CONFIG:RelWithDebInfo,Release>:-O1>)
+  target_compile_options(${name}_test PRIVATE ${CELL_TEST_CODE_OPT})
   if(NOT ARG_TIMEOUT)
     set(ARG_TIMEOUT 120)
   endif()

@@ -214,7 +214,7 @@ static int main_body(int argc, char** argv) {
   CLI::App app{"excalibur_bench: Excalibur serial-link round trip (command sent -> reply parsed)"};
   bool quick = false;
   int count = 200;
-  std::string dialect_path = std::string(CELL_SOURCE_DIR) + "/config/controllers/excalibur.yaml";
+  std::string dialect_path = CELL_SOURCE_DIR "/config/controllers/excalibur.yaml";
   app.add_flag("--quick", quick, "smoke run: 20 exchanges per case");
   app.add_option("--count", count, "measured exchanges per command and case")
       ->check(CLI::Range(1, 100000));

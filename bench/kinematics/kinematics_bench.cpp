@@ -171,7 +171,7 @@ LmaResult run_lma(const Model& model,
 static int main_body(int argc, char** argv) {
   std::size_t samples = 10000;
   std::size_t lma_samples = 2000;
-  std::string config_dir = std::string(CELL_SOURCE_DIR) + "/config/robots";
+  std::string config_dir = CELL_SOURCE_DIR "/config/robots";
   for (int i = 1; i + 1 < argc; i += 2) {
     if (std::strcmp(argv[i], "--samples") == 0) {
       samples = std::strtoul(argv[i + 1], nullptr, 10);

@@ -14,6 +14,7 @@
 //   LeastSquares/<sit>  the Ceres evaluation over every end point (beyond the thesis)
 #include <benchmark/benchmark.h>
 
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -28,7 +29,7 @@ namespace {
 using namespace cell::rapt;
 
 std::string read(const std::string& relative) {
-  std::ifstream in(std::string(CELL_SOURCE_DIR) + "/" + relative);
+  std::ifstream in(std::filesystem::path(CELL_SOURCE_DIR) / relative);
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();

@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <vector>
 #include <nlohmann/json.hpp>
 
 #include "cell/testing/env.hpp"
@@ -63,8 +64,15 @@ class CellctlWorldTest : public ::testing::Test {
   std::string scene_file(const std::string& text) {
     std::string path = ::testing::TempDir() + "/" + partition_ + "_scene.yaml";
     std::ofstream(path) << text;
+    scene_files_.push_back(path);
     return path;
   }
+  ~CellctlWorldTest() override {
+    for (const auto& f : scene_files_) {
+      std::remove(f.c_str());
+    }
+  }
+  std::vector<std::string> scene_files_;
 
   std::uint32_t domain_;
   std::string partition_;

@@ -110,6 +110,13 @@ class ExcaliburDriverTest : public ::testing::Test {
                fmt::format("cell-excalibur-driver-{}-{}/excalibur.pty", ::getpid(), counter_++))
                   .string()) {}
 
+  ~ExcaliburDriverTest() override {
+    driver_.reset();
+    sim_.reset();
+    std::error_code ec;  // the per-test directory of the link
+    std::filesystem::remove_all(std::filesystem::path(link_).parent_path(), ec);
+  }
+
   void start_sim(pe::ControllerSettings settings, pe::NoiseSettings noise = {}) {
     auto sim = pe::SimulatedController::start(*dialect_, settings,
                                               {.link_path = link_, .baud = 115200}, noise);

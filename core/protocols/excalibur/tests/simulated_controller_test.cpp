@@ -73,11 +73,21 @@ struct Host {
   }
 };
 
-std::string temp_link() {
-  return (std::filesystem::temp_directory_path() /
-          fmt::format("cell-excalibur-test-{}/excalibur.pty", ::getpid()))
-      .string();
+std::filesystem::path temp_link_dir() {
+  return std::filesystem::temp_directory_path() / fmt::format("cell-excalibur-test-{}", ::getpid());
 }
+
+std::string temp_link() { return (temp_link_dir() / "excalibur.pty").string(); }
+
+/// Removes this process's link directory when the tests are done.
+class TempLinkDir : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    std::error_code ec;
+    std::filesystem::remove_all(temp_link_dir(), ec);
+  }
+};
+const auto* const kTempLinkDir = ::testing::AddGlobalTestEnvironment(new TempLinkDir);
 
 TEST(SimulatedController, PublishesItsPtyAndTalksTheDialect) {
   const std::string link = temp_link();
