@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The sanitizer run: a second build of the libraries, services, clients and their unit tests
-# with AddressSanitizer and UndefinedBehaviorSanitizer (-O1, frame pointers; CELL_SANITIZE in
-# CMakeLists.txt) in ./build-asan, then every unit test. The multi-process tests under tests/
-# and the benchmarks are not in this build (they run on the normal one, scripts/test.sh).
+# with AddressSanitizer and UndefinedBehaviorSanitizer (-O1, the test code -O0, frame pointers;
+# CELL_SANITIZE in CMakeLists.txt, CELL_TEST_CODE_OPT in cmake/CellTargets.cmake) in
+# ./build-asan, then every unit test. The multi-process tests under tests/ and the benchmarks
+# are not in this build (they run on the normal one, scripts/test.sh).
 #
 # Every process a test starts is instrumented too; each writes its reports to a file of its
 # own under $CELL_SANITIZER_LOGS (a fresh directory). The run fails when a test fails or when
