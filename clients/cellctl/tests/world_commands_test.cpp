@@ -5,7 +5,6 @@
 
 #include <cstdio>
 #include <fstream>
-#include <vector>
 #include <nlohmann/json.hpp>
 
 #include "cell/testing/env.hpp"
@@ -62,17 +61,11 @@ class CellctlWorldTest : public ::testing::Test {
 
   /// A temporary scene file with `text`.
   std::string scene_file(const std::string& text) {
-    std::string path = ::testing::TempDir() + "/" + partition_ + "_scene.yaml";
-    std::ofstream(path) << text;
-    scene_files_.push_back(path);
-    return path;
+    std::ofstream(scene_path()) << text;
+    return scene_path();
   }
-  ~CellctlWorldTest() override {
-    for (const auto& f : scene_files_) {
-      std::remove(f.c_str());
-    }
-  }
-  std::vector<std::string> scene_files_;
+  std::string scene_path() const { return ::testing::TempDir() + "/" + partition_ + "_scene.yaml"; }
+  ~CellctlWorldTest() override { std::remove(scene_path().c_str()); }
 
   std::uint32_t domain_;
   std::string partition_;
