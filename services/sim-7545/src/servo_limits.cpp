@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <map>
+#include <mutex>
 #include <vector>
 
 #include "cell/config/yaml.hpp"
@@ -126,10 +128,41 @@ FollowResult simulate_follow(const JointPlant& plant,
   return r;
 }
 
+namespace {
+FollowableLimits scan_limits(const JointPlant& plant,
+                             const PdLaw& law,
+                             double speed_counts_s,
+                             double margin);
+}  // namespace
+
 FollowableLimits derive_limits(const JointPlant& plant,
                                const PdLaw& law,
                                double speed_counts_s,
                                double margin) {
+  // The scan runs ~1000 worst cases (~1.5 s): each derivation once per process.
+  using Key = std::array<double, 8>;
+  static std::mutex mutex;
+  static std::map<Key, FollowableLimits> done;
+  const Key key = {plant.accel_per_dac_counts_s2, plant.viscous_per_s, plant.coulomb_dac,
+                   law.kp, law.kv, law.period_s, speed_counts_s, margin};
+  {
+    const std::lock_guard lock(mutex);
+    if (const auto it = done.find(key); it != done.end()) {
+      return it->second;
+    }
+  }
+  FollowableLimits out = scan_limits(plant, law, speed_counts_s, margin);
+  const std::lock_guard lock(mutex);
+  done.emplace(key, out);
+  return out;
+}
+
+namespace {
+
+FollowableLimits scan_limits(const JointPlant& plant,
+                             const PdLaw& law,
+                             double speed_counts_s,
+                             double margin) {
   FollowableLimits out;
   out.usable_dac = (1.0 - margin) * static_cast<double>(dpr7545::kTorqueMax - dpr7545::kTorqueZero);
   out.speed_ceiling_counts_s =
@@ -137,24 +170,26 @@ FollowableLimits derive_limits(const JointPlant& plant,
   const auto fits = [&](double accel) {
     return simulate_follow(plant, law, speed_counts_s, accel).peak_dac <= out.usable_dac;
   };
-  // From full speed in 10 s (always gentle) up to full speed in one sample period.
+  // From full speed in 10 s (always gentle) up towards full speed in one sample period: the
+  // first acceleration that does not fit ends the scan. The peak is not monotonic in the
+  // acceleration (the encoder's one-count quantisation through the derivative term: up to
+  // kv / Ts per count), so a bisection could land on a value with a failing one just below it;
+  // the scan's result has every step below it fitting.
   double lo = speed_counts_s / 10.0;
-  double hi = speed_counts_s / law.period_s;
+  const double hi = speed_counts_s / law.period_s;
   if (!fits(lo)) {
     out.at_limits = simulate_follow(plant, law, speed_counts_s, lo);
     return out;
   }
-  if (fits(hi)) {
-    lo = hi;
-  }
-  while (hi - lo > 1e-3 * lo) {
-    const double mid = std::sqrt(lo * hi);  // the range spans decades: bisect in log
-    (fits(mid) ? lo : hi) = mid;
+  while (lo * 1.005 <= hi && fits(lo * 1.005)) {
+    lo *= 1.005;
   }
   out.accel_counts_s2 = lo;
   out.at_limits = simulate_follow(plant, law, speed_counts_s, lo);
   return out;
 }
+
+}  // namespace
 
 }  // namespace cell::sim7545
 
