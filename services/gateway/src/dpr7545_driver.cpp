@@ -7,7 +7,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
 #include <ctime>
+#include <filesystem>
+#include <mutex>
 #include <thread>
 #include <utility>
 
@@ -16,6 +19,7 @@
 #include "cell/common/log.hpp"
 #include "cell/dpr7545/codec.hpp"
 #include "cell/dpr7545/sim_control.hpp"
+#include "homing_record.hpp"
 
 namespace cell::gateway {
 namespace {
@@ -121,6 +125,8 @@ Dpr7545Driver::Dpr7545Driver(const kinematics::RobotModel& model, Dpr7545Options
     counts_per_unit_[idx(j)] = sign * spec.counts_per_unit;
     engage_step_counts_[idx(j)] =
         options_.engage_speed_fraction * spec.max_speed * spec.counts_per_unit * period_s_;
+    speed_counts_s_[idx(j)] = spec.max_speed * spec.counts_per_unit;
+    accel_counts_s2_[idx(j)] = spec.max_accel * spec.counts_per_unit;
   }
   words_.fill(d::kTorqueZero);
 }
@@ -231,32 +237,260 @@ Status Dpr7545Driver::on_activate() {
     dpr_->set_torque(j, d::kTorqueZero);
   }
   dpr_->set_timing_b(0);
-  lights_ = 0;
-  dpr_->write_lighting(lights_);  // the latch is write-only: start from a known state
   // A simulator's control block (sim_control.hpp) tells the sampling instants; on the real
   // card the window holds no such block (the ISA hole reads 0xFF).
   adopt_window();
   phase_ = Phase::kIdle;
-  homed_ = false;  // the counters may not be homed: home before moving
+  homed_ = false;  // the counters may not be homed: home before moving, unless re-attached
   gripper_ = cell_robot_GRIPPER_UNKNOWN;
+  lights_ = 0;
   latched_bits_ = 0;
   pending_bits_ = 0;
   periodic_reads_ = 0;
   for (int j = 0; j < kJoints; ++j) {
     position_[idx(j)] = dpr_->position_consistent(j);
   }
-  log::info("dpr7545", "slave answered; home the robot to start control mode",
-            {{"transport", transport_->describe()},
-             {"sample_period_us", std::to_string(options_.sample_period_us)}});
+  recorded_gripper_.store(kNoRecord, std::memory_order_release);
+  adopt_homing_record();
+  dpr_->write_lighting(lights_);  // the latch is write-only: from a known (or adopted) state
+  shared_lights_.store(lights_, std::memory_order_relaxed);
+  JointState initial;
+  fill_state(initial);  // the recorder's view
+  recorder_ = std::jthread([this](const std::stop_token& stop) { record_homing(stop); });
+  if (!homed_) {
+    log::info("dpr7545", "slave answered; home the robot to start control mode",
+              {{"transport", transport_->describe()},
+               {"sample_period_us", std::to_string(options_.sample_period_us)}});
+  }
   return ok_status();
+}
+
+void Dpr7545Driver::adopt_homing_record() {
+  if (options_.homing_record.empty()) {
+    return;
+  }
+  const std::string& path = options_.homing_record;
+  auto record = load_homing_record(path);
+  if (record && !record->has_value()) {
+    return;  // none: the arm was never homed under a record, or its homing was void
+  }
+  std::string refusal;
+  if (!record) {
+    refusal = record.error().message;
+  } else {
+    std::array<double, kJoints> tolerance{};
+    for (int j = 0; j < kJoints; ++j) {
+      // A quarter second at full speed: one record period (0.1 s) of motion since the last
+      // write, the coast after the slave dropped the torques, and margin.
+      const auto& spec = model_.joints()[idx(j)];
+      tolerance[idx(j)] = 0.25 * spec.max_speed * std::abs(counts_per_unit_[idx(j)]);
+    }
+    if (auto why = homing_record_refusal(**record, board_pid_, position_, tolerance)) {
+      refusal = *why;
+    }
+  }
+  if (!refusal.empty()) {
+    std::error_code ec;
+    std::filesystem::remove(path, ec);
+    log::warn("dpr7545", "homing record not adopted: home the robot",
+              {{"record", path}, {"why", refusal}});
+    return;
+  }
+  const HomingRecord& r = **record;
+  homed_ = true;
+  using G = HomingRecord::Gripper;
+  gripper_ = r.gripper == G::kOpen ? cell_robot_GRIPPER_OPEN
+             : r.gripper == G::kClosed ? cell_robot_GRIPPER_CLOSED
+             : r.gripper == G::kOpening ? cell_robot_GRIPPER_OPENING
+             : r.gripper == G::kClosing ? cell_robot_GRIPPER_CLOSING
+                                        : cell_robot_GRIPPER_UNKNOWN;
+  recorded_gripper_.store(static_cast<int>(r.gripper), std::memory_order_release);
+  lights_ = r.lights;
+  // A gripper procedure under way when the predecessor died: the latch is as before it or as
+  // the procedure leaves it. Completing it makes it known, and does what was asked, where it
+  // was asked (the arm has not moved since: no master, no torque).
+  if (r.gripper == G::kOpening || r.gripper == G::kClosing) {
+    (void)begin_leave(r.gripper == G::kClosing ? Procedure::kGripperClose
+                                               : Procedure::kGripperOpen);
+  }
+  log::info("dpr7545", "re-attached to the board: its homing kept, the arm held where it stands",
+            {{"record", path},
+             {"counts", fmt::format("{}, {}, {}, {}", position_[0], position_[1], position_[2],
+                                    position_[3])},
+             {"gripper", gripper_name(r.gripper)}});
+}
+
+void Dpr7545Driver::record_homing(const std::stop_token& stop) {
+  const std::string& path = options_.homing_record;
+  std::optional<HomingRecord> written;
+  bool warned = false;
+  std::mutex m;
+  std::condition_variable_any cv;
+  // Polled every 5 ms, so that a gripper procedure waits at most that long for the record to
+  // say "unknown" (gripper_recorded()); the positions are rewritten every record period.
+  constexpr auto kPoll = std::chrono::milliseconds(5);
+  auto next_positions = std::chrono::steady_clock::now();
+  auto next_statistics = next_positions + kStatisticsLog;
+  std::uint64_t logged_exchanges = 0;
+  for (;;) {
+    {
+      std::unique_lock lock(m);
+      cv.wait_for(lock, stop, kPoll, [] { return false; });
+    }
+    if (stop.stop_requested()) {
+      return;  // a clean stop keeps the record: the board keeps its homing
+    }
+    if (std::chrono::steady_clock::now() >= next_statistics) {
+      next_statistics += kStatisticsLog;
+      if (exchanges_.load(std::memory_order_relaxed) != logged_exchanges) {
+        logged_exchanges = log_statistics();
+      }
+    }
+    if (path.empty()) {
+      continue;
+    }
+    if (!shared_homed_.load(std::memory_order_relaxed)) {
+      if (written || std::filesystem::exists(path)) {
+        std::error_code ec;
+        std::filesystem::remove(path, ec);  // homing started, or the board was replaced
+        written.reset();
+      }
+      recorded_gripper_.store(kNoRecord, std::memory_order_release);
+      continue;
+    }
+    const int g = shared_gripper_.load(std::memory_order_acquire);
+    using G = HomingRecord::Gripper;
+    const G gripper = g == cell_robot_GRIPPER_OPEN      ? G::kOpen
+                      : g == cell_robot_GRIPPER_CLOSED  ? G::kClosed
+                      : g == cell_robot_GRIPPER_OPENING ? G::kOpening
+                      : g == cell_robot_GRIPPER_CLOSING ? G::kClosing
+                                                        : G::kUnknown;
+    const auto now = std::chrono::steady_clock::now();
+    const bool gripper_changed = !written || written->gripper != gripper;
+    if (!gripper_changed && now < next_positions) {
+      continue;
+    }
+    next_positions = now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                               std::chrono::duration<double>(kHomingRecordPeriodS));
+    HomingRecord r;
+    r.board_pid = board_pid_;
+    for (int j = 0; j < kJoints; ++j) {
+      r.counts[idx(j)] = shared_counts_[idx(j)].load(std::memory_order_relaxed);
+    }
+    r.gripper = gripper;
+    r.lights = shared_lights_.load(std::memory_order_relaxed);
+    if (written && written->counts == r.counts && written->gripper == r.gripper &&
+        written->lights == r.lights && written->board_pid == r.board_pid) {
+      continue;
+    }
+    if (auto s = save_homing_record(path, r); !s) {
+      if (!warned) {
+        log::warn("dpr7545", "cannot keep the homing record: a restarted gateway will home again",
+                  {{"error", s.error().message}});
+        warned = true;
+      }
+      std::error_code ec;
+      std::filesystem::remove(path, ec);  // a stale record must not be adopted
+      written.reset();
+      recorded_gripper_.store(kNoRecord, std::memory_order_release);
+      continue;
+    }
+    written = r;
+    recorded_gripper_.store(static_cast<int>(gripper), std::memory_order_release);
+  }
+}
+
+void Dpr7545Driver::account(const std::array<double, kJoints>& errors) noexcept {
+  for (int j = 0; j < kJoints; ++j) {
+    const auto i = idx(j);
+    const double e = std::abs(errors[i]);
+    const auto bin = std::min<std::size_t>(static_cast<std::size_t>(e * 4.0), kErrorBins - 1);
+    error_bins_[i][bin].fetch_add(1, std::memory_order_relaxed);
+    const auto quarters = static_cast<std::int32_t>(std::min(e * 4.0, 1e9));
+    if (quarters > error_max_quarters_[i].load(std::memory_order_relaxed)) {
+      error_max_quarters_[i].store(quarters, std::memory_order_relaxed);
+    }
+    const std::int32_t torque = std::abs(static_cast<std::int32_t>(words_[i]) -
+                                         static_cast<std::int32_t>(d::kTorqueZero));
+    if (torque > torque_peak_[i].load(std::memory_order_relaxed)) {
+      torque_peak_[i].store(torque, std::memory_order_relaxed);
+    }
+  }
+  exchanges_.fetch_add(1, std::memory_order_relaxed);
+}
+
+Dpr7545ServoStatistics Dpr7545Driver::statistics() const {
+  Dpr7545ServoStatistics out;
+  out.exchanges = exchanges_.load(std::memory_order_relaxed);
+  out.steps_absorbed = steps_absorbed_.load(std::memory_order_relaxed);
+  for (int j = 0; j < kJoints; ++j) {
+    const auto i = idx(j);
+    std::uint64_t total = 0;
+    std::array<std::uint32_t, kErrorBins> bins{};
+    for (std::size_t b = 0; b < kErrorBins; ++b) {
+      bins[b] = error_bins_[i][b].load(std::memory_order_relaxed);
+      total += bins[b];
+    }
+    const auto quantile = [&](double q) {
+      const auto wanted = static_cast<std::uint64_t>(std::ceil(q * static_cast<double>(total)));
+      std::uint64_t seen = 0;
+      for (std::size_t b = 0; b < kErrorBins; ++b) {
+        seen += bins[b];
+        if (seen >= wanted && seen > 0) {
+          return static_cast<double>(b + 1) * 0.25;
+        }
+      }
+      return 0.0;
+    };
+    out.error_p50_counts[i] = quantile(0.5);
+    out.error_p99_counts[i] = quantile(0.99);
+    out.error_max_counts[i] = error_max_quarters_[i].load(std::memory_order_relaxed) * 0.25;
+    out.torque_peak_fraction[i] =
+        torque_peak_[i].load(std::memory_order_relaxed) /
+        static_cast<double>(d::kTorqueMax - d::kTorqueZero);
+  }
+  return out;
+}
+
+bool Dpr7545Driver::gripper_recorded() const noexcept {
+  if (options_.homing_record.empty()) {
+    return true;
+  }
+  const int recorded = recorded_gripper_.load(std::memory_order_acquire);
+  const auto under_way = procedure_ == Procedure::kGripperClose ? HomingRecord::Gripper::kClosing
+                                                                : HomingRecord::Gripper::kOpening;
+  return recorded == kNoRecord || recorded == static_cast<int>(under_way);
+}
+
+std::uint64_t Dpr7545Driver::log_statistics() const {
+  const Dpr7545ServoStatistics st = statistics();
+  const auto joints = [](const std::array<double, kJoints>& v, const char* format) {
+    std::string text;
+    for (int j = 0; j < kJoints; ++j) {
+      text += fmt::format(fmt::runtime(format), v[idx(j)]);
+      text += j + 1 < kJoints ? " " : "";
+    }
+    return text;
+  };
+  // Every field in the joints' order J1 J2 Z R (bench/table_soak.sh reads the last line).
+  log::info("dpr7545", "servo statistics",
+            {{"exchanges", std::to_string(st.exchanges)},
+             {"setpoint_steps_absorbed", std::to_string(st.steps_absorbed)},
+             {"error_p50_counts", joints(st.error_p50_counts, "{:.2f}")},
+             {"error_p99_counts", joints(st.error_p99_counts, "{:.2f}")},
+             {"error_max_counts", joints(st.error_max_counts, "{:.2f}")},
+             {"torque_peak_fraction", joints(st.torque_peak_fraction, "{:.3f}")}});
+  return st.exchanges;
 }
 
 void Dpr7545Driver::adopt_window() noexcept {
   const d::SimControl control(transport_->window());
   if (control.valid()) {
     sim_clock_.emplace(control);
+    board_pid_ = control.owner_pid();
   } else {
     sim_clock_.reset();
+    board_pid_ = 0;
   }
   last_board_ns_ = 0;
   // A simulator that serves a late master within a grace is waited for as long: a period it
@@ -281,6 +515,16 @@ void Dpr7545Driver::stop_control() noexcept {
 }
 
 void Dpr7545Driver::on_deactivate() noexcept {
+  if (recorder_.joinable()) {
+    recorder_.request_stop();
+    recorder_.join();
+  }
+  if (exchanges_.load(std::memory_order_relaxed) > 0) {
+    try {
+      (void)log_statistics();
+    } catch (...) {  // a log line is not worth an exception out of a noexcept stop
+    }
+  }
   if (phase_ == Phase::kControl || phase_ == Phase::kEngage) {
     stop_control();
   }
@@ -347,6 +591,11 @@ void Dpr7545Driver::fill_state(JointState& state) const noexcept {
   }
   state.gripper = gripper_;
   state.homed = homed_;
+  for (int j = 0; j < kJoints; ++j) {
+    shared_counts_[idx(j)].store(position_[idx(j)], std::memory_order_relaxed);
+  }
+  shared_homed_.store(homed_, std::memory_order_relaxed);
+  shared_gripper_.store(gripper_, std::memory_order_relaxed);
   state.busy = phase_ == Phase::kLeave || phase_ == Phase::kHoming || phase_ == Phase::kGripper;
   state.fault_bits = phase_ == Phase::kFault ? latched_bits_ : 0;
   state.clock_advance_s = clock_advance_s_;
@@ -403,6 +652,7 @@ CycleStatus Dpr7545Driver::handshake_read(JointState& state, std::int64_t start)
     fill_state(state);
     return CycleStatus::kRetry;
   }
+  clock_advance_s_ = -1.0;  // the host's clock, unless the simulator's board tells its own
   track_sample(seen, started_before);
   check_phase(started_before, seen - start);
   const bool have_velocities = (dpr_->timing_a() & d::kTimingAVelocities) != 0;
@@ -509,9 +759,13 @@ void Dpr7545Driver::start_procedure() noexcept {
 CycleStatus Dpr7545Driver::read(Clock::time_point now, JointState& state) {
   tighten_timer_slack();
   const std::int64_t start = now_ns();
-  // The board's clock has not moved for the host until an exchange says it has (a simulator
-  // that publishes it); the real card's is not visible.
-  clock_advance_s_ = sim_clock_ && sim_clock_->board_time_ns() > 0 ? 0.0 : -1.0;
+  // The path moves only while the board controls the arm: 0 until an exchange of control mode
+  // says how far the board's clock advanced (a simulator that publishes it), or -1 (the real
+  // card's clock is not visible: the host's stands for it). Outside control mode (not yet
+  // engaged after a homing, a gripper dwell, a fault) the arm follows no path, so the path
+  // must not run on: a trajectory loaded just after a homing ran ~20 ms ahead before control
+  // mode engaged, and met the arm at full speed (a J2 torque fault at 2810 deg/s^2).
+  clock_advance_s_ = 0.0;
   cycle_deadline_ns_ = start + budget_ns_;
   handshake_open_ = false;
   const bool may_engage = ready_to_engage(now);
@@ -594,7 +848,11 @@ CycleStatus Dpr7545Driver::read(Clock::time_point now, JointState& state) {
       // cleared command and gripper. Only then may the procedure's register be written.
       if (leave_step_ >= 0 && dpr_->timing_a() != 0) {
         dpr_->set_timing_a(0);
-        if (++leave_step_ >= 3) {
+        // A gripper procedure reaches the board only once the homing record says "unknown"
+        // (the latch is write-only: a successor must never adopt a state it may have left).
+        const bool gripper = procedure_ == Procedure::kGripperOpen ||
+                             procedure_ == Procedure::kGripperClose;
+        if (++leave_step_ >= 3 && (!gripper || gripper_recorded())) {
           start_procedure();
           fill_state(state);
           return CycleStatus::kOk;
@@ -691,8 +949,34 @@ CycleStatus Dpr7545Driver::write(Clock::time_point now, const JointSetpoint& set
     if (fresh_engage_) {
       offset_[i] = actual - desired;  // bumpless: the reference starts where the arm is
     } else {
+      // A host setpoint that steps further than the joint's top speed can carry it since the
+      // last exchange is not a path: a trajectory that starts within the gateway's start
+      // tolerance of the arm but not at the held setpoint (right after a homing, the arm still
+      // settling onto its index, 61 counts of J1 at once), a hold re-seated at the measured
+      // joints. The step goes into the offset, which closes it at the engage speed, as when
+      // control mode starts: on this board a step of ~25 counts is a torque fault.
+      // A path's step is the integral of its own rate over the gap (trapezoidal: exact for the
+      // planners' piecewise-linear rates); what deviates from it by more than the joint's
+      // acceleration limit allows over the gap is a step of the setpoint itself.
+      const double gap_s = std::max(period_s_, static_cast<double>(sample_gap_ns_) * 1e-9);
+      const double step = desired - last_desired_[i];
+      const double rate = with_rate ? setpoint.qd[j] * counts_per_unit_[i] : 0.0;
+      const double deviation =
+          with_rate && have_last_desired_ ? step - 0.5 * (rate + last_rate_[i]) * gap_s : step;
+      const double allowed = with_rate && have_last_desired_
+                                 ? 2.0 + accel_counts_s2_[i] * gap_s * gap_s
+                                 : 2.0 + 1.5 * speed_counts_s_[i] * gap_s;
+      if (std::abs(deviation) > allowed) {
+        offset_[i] -= deviation;
+        steps_absorbed_.fetch_add(1, std::memory_order_relaxed);
+      }
+      last_rate_[i] = rate;
       offset_[i] = offset_[i] > 0 ? std::max(0.0, offset_[i] - engage_step_counts_[i])
                                   : std::min(0.0, offset_[i] + engage_step_counts_[i]);
+    }
+    last_desired_[i] = desired;
+    if (fresh_engage_) {
+      last_rate_[i] = with_rate ? setpoint.qd[j] * counts_per_unit_[i] : 0.0;
     }
     applied_[i] = desired + offset_[i];
     const double e = applied_[i] - actual;
@@ -700,7 +984,11 @@ CycleStatus Dpr7545Driver::write(Clock::time_point now, const JointSetpoint& set
     words_[i] = d::torque_word(d::pd_torque(kp_[i], kv_[i], derivative_s, e, e_prev));
     error_[i] = e;
   }
+  if (!fresh_engage_) {
+    account(error_);
+  }
   fresh_engage_ = false;
+  have_last_desired_ = sized && with_rate;
   applied_valid_ = sized;
   for (int j = 0; j < kJoints; ++j) {
     dpr_->set_torque(j, words_[idx(j)]);
@@ -794,11 +1082,13 @@ Status Dpr7545Driver::command(DriverCommand command, const CommandArgs& args) {
       CELL_TRY(busy());
       gripper_ = command == DriverCommand::kGripperClose ? cell_robot_GRIPPER_CLOSING
                                                          : cell_robot_GRIPPER_OPENING;
+      shared_gripper_.store(gripper_, std::memory_order_release);
       return begin_leave(command == DriverCommand::kGripperClose ? Procedure::kGripperClose
                                                                  : Procedure::kGripperOpen);
     case DriverCommand::kLights:
       lights_ = d::lighting_latch(args.halogen_on, args.fluorescent_on);
       dpr_->write_lighting(lights_);
+      shared_lights_.store(lights_, std::memory_order_relaxed);
       return ok_status();
     case DriverCommand::kSetGains:
       if (args.kp.size() != kJoints || args.kv.size() != kJoints) {
@@ -906,6 +1196,7 @@ DriverFactory parse_dpr7545_driver(config::MapReader& section) {
   section.optional("homing_timeout_s", o.homing_timeout_s);
   section.optional("gripper_timeout_s", o.gripper_timeout_s);
   section.optional("engage_speed_fraction", o.engage_speed_fraction);
+  section.optional("homing_record", o.homing_record);
   if (transport == "shm") {
     o.transport = Dpr7545Options::Transport::kShm;
   } else if (transport == "physical") {

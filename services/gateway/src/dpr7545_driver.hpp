@@ -8,6 +8,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 
 #include "cell/dpr7545/dpr.hpp"
 #include "cell/dpr7545/registers.hpp"
@@ -42,9 +43,30 @@ struct Dpr7545Options {
   /// `engage_speed_fraction`: when control mode starts away from the host's setpoint, the
   /// reference closes the gap at this fraction of each joint's speed limit (bumpless start).
   double engage_speed_fraction = 0.1;
+  /// `homing_record`: the file (HomingRecord, homing_record.hpp) where the driver keeps what
+  /// it knows of the board while the arm is homed, so that a gateway started after this one
+  /// died re-attaches to the board without homing again. Relative to the working directory
+  /// (the run directory under `cell up`). Empty: none (every start needs a homing).
+  std::string homing_record;
 
   /// Ok, or kConfig naming the key, value and rule (without file location).
   Status validate() const;
+};
+
+/// How closely the arm followed and how much of the torque word it took, over every exchange of
+/// control mode since activation, joint by joint (J1, J2, Z, R). The following error is
+/// |reference - encoder| in counts as the PD law saw it, from a histogram of 0.25-count bins
+/// (p50 and p99 are bin upper edges; max is exact).
+struct Dpr7545ServoStatistics {
+  std::uint64_t exchanges = 0;
+  /// Host setpoints that stepped further than a joint's top speed carries it in one exchange,
+  /// closed at the engage speed instead (see write()).
+  std::uint64_t steps_absorbed = 0;
+  std::array<double, dpr7545::kJoints> error_p50_counts{};
+  std::array<double, dpr7545::kJoints> error_p99_counts{};
+  std::array<double, dpr7545::kJoints> error_max_counts{};
+  /// max |torque word - 0x800| / 2047: 1.0 is the edge of the DAC's range (a torque fault).
+  std::array<double, dpr7545::kJoints> torque_peak_fraction{};
 };
 
 /// What the driver counted since activation (read from another thread: relaxed atomics).
@@ -97,8 +119,15 @@ struct Dpr7545Counters {
 /// mode restarts. The slave looks at the gripper register only when idle (digest 000 §2.3),
 /// hence the detour. Lighting writes the latch at 0xC9000 (window offset 0x1000) at once.
 ///
-/// Control mode starts only once the robot is homed (after a gateway restart the driver
-/// cannot know that the slave's counters are homed: the robot must be homed again), only
+/// Re-attaching. The slave keeps counting while no master runs. With a homing_record, a driver
+/// started after its predecessor died (kill -9, a crash: the slave faulted with torques late
+/// and dropped the DACs) adopts the predecessor's homing, gripper and lights when the record
+/// matches the board (homing_record_refusal: the same simulator, the counters within a
+/// quarter second of full speed of the record, not a reset board), so the arm is held where
+/// it stands once at rest, bumpless, and the job goes on without a homing. A record that does
+/// not match is removed and logged with why: the robot must be homed, as without one.
+///
+/// Control mode starts only once the robot is homed (homed here or adopted), only
 /// when read() is called periodically (the slave demands one exchange per sample from then
 /// on), and only in a cycle that began on time (the slave anchors its period grid then: each
 /// later cycle of ours finds the period start just after it wakes). If the first exchanges
@@ -137,6 +166,8 @@ class Dpr7545Driver final : public RobotDriver {
 
   /// Counters since activation (thread-safe snapshot).
   Dpr7545Counters counters() const noexcept;
+  /// Following error and torque statistics since activation (thread-safe snapshot).
+  Dpr7545ServoStatistics statistics() const;
   /// Current PD gains (servo thread only).
   const std::array<double, dpr7545::kJoints>& kp() const noexcept { return kp_; }
   const std::array<double, dpr7545::kJoints>& kv() const noexcept { return kv_; }
@@ -162,6 +193,20 @@ class Dpr7545Driver final : public RobotDriver {
   /// Reads the window's simulator control block, if any: its clocks (sim_clock_) and its
   /// grace, which sets info_.link_retries. After the transport is (re)opened.
   void adopt_window() noexcept;
+  /// on_activate: adopts the homing record when it matches the board (see the class comment).
+  void adopt_homing_record();
+  /// The recorder thread: rewrites the homing record while homed, removes it otherwise, and
+  /// logs the servo's statistics every kStatisticsLogS while control mode exchanges.
+  void record_homing(const std::stop_token& stop);
+  /// Logs statistics() as one "servo statistics" line; returns its exchanges.
+  std::uint64_t log_statistics() const;
+  static constexpr std::chrono::seconds kStatisticsLog{30};
+  /// Adds one exchange's errors and words to the statistics (servo thread; no allocation).
+  void account(const std::array<double, dpr7545::kJoints>& errors) noexcept;
+  /// True when the record on disk names the gripper procedure under way (procedure_) as under
+  /// way, or there is none: the procedure may reach the board, and a successor that adopts the
+  /// record completes it. Always true without a homing record.
+  bool gripper_recorded() const noexcept;
 
   const kinematics::RobotModel& model_;
   Dpr7545Options options_;
@@ -172,6 +217,11 @@ class Dpr7545Driver final : public RobotDriver {
 
   std::array<double, dpr7545::kJoints> counts_per_unit_{};  ///< signed (see the class comment)
   std::array<double, dpr7545::kJoints> engage_step_counts_{};  ///< per sample
+  std::array<double, dpr7545::kJoints> speed_counts_s_{};      ///< top speed, counts/s
+  std::array<double, dpr7545::kJoints> accel_counts_s2_{};     ///< acceleration limit
+  std::array<double, dpr7545::kJoints> last_desired_{};  ///< the host's setpoint last exchange
+  std::array<double, dpr7545::kJoints> last_rate_{};     ///< ... and its rate, counts/s
+  bool have_last_desired_ = false;
   std::array<double, dpr7545::kJoints> kp_{};
   std::array<double, dpr7545::kJoints> kv_{};
   double period_s_;
@@ -193,7 +243,8 @@ class Dpr7545Driver final : public RobotDriver {
   std::optional<dpr7545::SimControl> sim_clock_;
   std::int64_t last_board_ns_ = 0;  ///< the simulator's board clock at the last sample (0: none)
   /// JointState::clock_advance_s of this cycle: the board's clock since the previous cycle
-  /// (0 without an exchange), or -1 when the board's clock is not known (the real card).
+  /// (0 without a control-mode exchange), or -1 when the board's clock is not known (the real
+  /// card, in an exchange).
   double clock_advance_s_ = -1.0;
   bool handshake_open_ = false;
   bool fresh_engage_ = false;
@@ -233,6 +284,25 @@ class Dpr7545Driver final : public RobotDriver {
   std::atomic<std::int64_t> max_wait_ns_{0};
   std::atomic<std::int64_t> max_skew_ns_{0};
   std::atomic<std::uint64_t> rephases_{0};
+
+  // What the recorder thread reads (fill_state() writes them on the servo thread).
+  mutable std::array<std::atomic<std::int32_t>, dpr7545::kJoints> shared_counts_{};
+  mutable std::atomic<bool> shared_homed_{false};
+  mutable std::atomic<int> shared_gripper_{cell_robot_GRIPPER_UNKNOWN};
+  std::atomic<std::uint8_t> shared_lights_{0};
+  /// The gripper state the record on disk names (HomingRecord::Gripper as int), kNoRecord when
+  /// there is none (set by the recorder; see gripper_recorded()).
+  static constexpr int kNoRecord = -1;
+  std::atomic<int> recorded_gripper_{kNoRecord};
+  std::uint32_t board_pid_ = 0;  ///< the simulator's pid (its control block); 0: the real card
+  std::jthread recorder_;
+
+  static constexpr std::size_t kErrorBins = 512;  ///< 0.25 count each: up to 128 counts
+  std::array<std::array<std::atomic<std::uint32_t>, kErrorBins>, dpr7545::kJoints> error_bins_{};
+  std::array<std::atomic<std::int32_t>, dpr7545::kJoints> error_max_quarters_{};
+  std::array<std::atomic<std::int32_t>, dpr7545::kJoints> torque_peak_{};
+  std::atomic<std::uint64_t> exchanges_{0};
+  std::atomic<std::uint64_t> steps_absorbed_{0};
 };
 
 /// `driver: {kind: dpr7545, transport: shm, shm_name: /cell-dpr7545, sample_period_us: 1000,

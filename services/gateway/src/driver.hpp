@@ -31,9 +31,10 @@ struct JointState {
   bool busy = false;                  ///< a driver-side procedure (homing, gripper dwell) runs
   std::uint32_t fault_bits = 0;       ///< controller error bits, 0 when none
   /// How far the controller's own clock advanced since the previous cycle's read [s], when
-  /// the host can see that clock (a simulated 7545 board publishes it; 0 in a cycle without
-  /// an exchange): the arm moved that long, so the path advances that much, whatever the
-  /// host's clock did. -1: unknown; the path follows the host's clock, bounded by
+  /// the host can see that clock (a simulated 7545 board publishes it): the arm moved that
+  /// long, so the path advances that much, whatever the host's clock did. 0: the path stands
+  /// still (the 7545 in a cycle without a control-mode exchange: the arm follows no path).
+  /// -1: unknown; the path follows the host's clock, bounded by
   /// DriverInfo::max_setpoint_advance.
   double clock_advance_s = -1.0;
 };

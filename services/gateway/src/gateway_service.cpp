@@ -193,6 +193,20 @@ void GatewayService::handle_trajectory(const cell_motion_Trajectory& message) {
     return;
   }
   const std::string id(bus::str(message.trajectory_id));
+  // A trajectory sent before this gateway started went to its predecessor (the topic keeps
+  // recent requests for late joiners), which died running it or before it could: the arm is
+  // not where it started. It is neither run nor answered: its sender learns from this
+  // gateway's state that nobody runs it (the predecessor's outcome is unseen) and verifies
+  // what the arm did. A restarted gateway never resumes a stale trajectory.
+  if (message.header.stamp_ns > 0 && message.header.stamp_ns < started_wall_ns_) {
+    log::info("trajectory", "sent to the gateway before this one: not run",
+              {{"id", id},
+               {"sent_before_start_s",
+                fmt::format("{:.2f}", static_cast<double>(started_wall_ns_ -
+                                                          message.header.stamp_ns) *
+                                          1e-9)}});
+    return;
+  }
   Status status = [&]() -> Status {
     if (id.empty()) {
       return Error{Errc::kInvalidArgument, "trajectory has no trajectory_id"};

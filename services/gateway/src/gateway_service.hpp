@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "cell/bus/reader.hpp"
+#include "cell/common/time.hpp"
 #include "cell/bus/topic.hpp"
 #include "cell/bus/writer.hpp"
 #include "cell/kinematics/robot_model.hpp"
@@ -80,6 +81,9 @@ class GatewayService {
   // Supervisor watch (main thread only).
   std::optional<service::ServiceDirectory> directory_;
   bool supervisors_lost_ = false;  ///< every supervisor lost, and the robot stopped for it once
+  /// When this gateway started (wall clock, ns): a trajectory stamped before it was sent to a
+  /// predecessor (the topic keeps recent commands for late joiners) and is never run.
+  std::int64_t started_wall_ns_ = wall_time_ns();
 };
 
 }  // namespace cell::gateway

@@ -7,6 +7,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -22,6 +23,7 @@
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
 #include "gateway_config.hpp"
+#include "homing_record.hpp"
 
 namespace cell::gateway {
 namespace {
@@ -529,6 +531,40 @@ TEST_F(Dpr7545DriverTest, ControlModeStartsBumplessAndClosesTheGap) {
   EXPECT_EQ(dpr_.error(), 0);
 }
 
+// A host setpoint that steps once control mode runs (a trajectory that starts within the start
+// tolerance of the arm, not at the held setpoint: 61 counts of J1 right after a homing) is not
+// a path the arm can follow: the step is closed at the engage speed, like the gap at engage,
+// never put into one exchange's error (a torque fault from ~25 counts on the 7545).
+TEST_F(Dpr7545DriverTest, ASetpointStepIsClosedAtTheEngageSpeedNotInOneExchange) {
+  slave_.home_landing = {0, 0, 0, 0};
+  slave_.gain = 0.012;
+  home_and_engage();
+  ASSERT_FALSE(HasFatalFailure());
+  for (int i = 0; i < 5; ++i) {
+    ASSERT_NE(cycle(), CycleStatus::kFault);
+  }
+  // 1500 counts of J1 and 1000 of Z at once, at rest (qd 0): beyond what the joints' limits
+  // allow over this test's 20 ms sample (J1: 1430 deg/s^2 x (20 ms)^2 = 500 counts).
+  setpoint_.q[0] = 1500.0 / counts(0);
+  setpoint_.q[2] = -1000.0 / counts(2);
+  double worst_word = 0;
+  const bool closed = cycle_until(
+      [&] {
+        for (const auto& p : slave_.periods()) {
+          worst_word = std::max(worst_word, std::abs(static_cast<double>(p.torque[0]) - 0x800));
+        }
+        return std::abs(state_.q[0] * counts(0) - 1500.0) < 3 &&
+               std::abs(state_.q[2] * counts(2) + 1000.0) < 3;
+      },
+      400);
+  EXPECT_TRUE(closed) << "J1 at " << state_.q[0] * counts(0) << " counts";
+  EXPECT_FALSE(slave_.saw_invalid_torque_output());
+  EXPECT_EQ(dpr_.error(), 0);
+  EXPECT_GE(driver_.statistics().steps_absorbed, 1U);
+  // The whole step at once would be a PD word of 60 x 1500 counts.
+  EXPECT_LT(worst_word, 2047.0);
+}
+
 // Digest 000 §9.2 case 6: torques late -> 0x1000: a fault with its meaning, torques zeroed,
 // latched until reset; reset clears the register and restarts control mode.
 TEST_F(Dpr7545DriverTest, TorquesLateFaultIsLatchedAndResetRestartsControl) {
@@ -655,6 +691,161 @@ TEST_F(Dpr7545DriverTest, SilentSlaveGivesBoundedRetriesNotABlockedCycle) {
   EXPECT_GE(retries + (last_read_ == CycleStatus::kFault ? 1 : 0), 1);
   EXPECT_GE(driver_.counters().handshake_timeouts, 1U);
   slave_.stall = false;
+}
+
+// A master that dies mid-control (it stops exchanging: the slave flags torques late and drops
+// its DACs) is followed by one that re-attaches: the homing record (homing_record.hpp) matches
+// the board, so the successor is homed at once, clears the stale deadline bit, and holds the
+// arm where it stands, bumpless, with no homing (the slave homed once, in the first master).
+class Dpr7545ReattachTest : public Dpr7545DriverTest {
+ protected:
+  Dpr7545ReattachTest() : Dpr7545DriverTest(ibm7545(), with_record()) {}
+  ~Dpr7545ReattachTest() override {
+    std::error_code ec;
+    std::filesystem::remove(record_path(), ec);
+  }
+
+  static std::string record_path() {
+    return (std::filesystem::temp_directory_path() /
+            fmt::format("cell-dpr-homing-{}.json", ::getpid()))
+        .string();
+  }
+  static Dpr7545Options with_record() {
+    Dpr7545Options o = test_options();
+    o.homing_record = record_path();
+    return o;
+  }
+
+  /// A second master on the same board (the gateway started again).
+  std::unique_ptr<Dpr7545Driver> successor() {
+    return std::make_unique<Dpr7545Driver>(
+        model_, with_record(), kPeriod, [this]() -> Result<std::unique_ptr<d::Transport>> {
+          return std::unique_ptr<d::Transport>(std::make_unique<ViewTransport>(memory_->window()));
+        });
+  }
+
+  /// Runs `driver` for `n` cycles on the period grid, holding `q` (nullopt: the measured
+  /// joints, as the servo holds a robot it just took over). Returns the last read's status.
+  CycleStatus run(Dpr7545Driver& driver, int n, JointState& state) {
+    CycleStatus last = CycleStatus::kOk;
+    auto next = Clock::now();
+    JointSetpoint hold;
+    for (int i = 0; i < n; ++i) {
+      std::this_thread::sleep_until(next);
+      next += kPeriod;
+      const auto now = Clock::now();
+      last = driver.read(now, state);
+      if (last == CycleStatus::kFault) {
+        return last;
+      }
+      if (hold.q.size() == 0 && state.q.size() == 4) {
+        hold.q = state.q;  // taken over where it stands
+        hold.qd = JointVector::Zero(4);
+      }
+      (void)driver.write(now, hold.q.size() == 4 ? hold : setpoint_);
+    }
+    return last;
+  }
+};
+
+TEST_F(Dpr7545ReattachTest, ARestartedMasterKeepsTheHomingAndHoldsTheArmWhereItStands) {
+  // The index pulses leave the arm away from 0 (so the record is not all zeros); the host
+  // holds it there.
+  slave_.home_landing = {1200, -800, 1500, 300};
+  for (int j = 0; j < 4; ++j) {
+    setpoint_.q[j] = slave_.home_landing[static_cast<std::size_t>(j)] / counts(j);
+  }
+  home_and_engage();
+  ASSERT_FALSE(HasFatalFailure());
+  ASSERT_THAT(driver_.command(DriverCommand::kGripperClose, {}), IsOk());
+  // While the board works the gripper, the record says the close is under way (never "open"
+  // nor "closed"): a successor completes it rather than believe a state the latch may have
+  // left.
+  ASSERT_TRUE(cycle_until([&] { return dpr_.gripper() != 0; }));
+  auto during = load_homing_record(record_path());
+  ASSERT_THAT(during, IsOk());
+  ASSERT_TRUE(during->has_value());
+  EXPECT_EQ((*during)->gripper, HomingRecord::Gripper::kClosing);
+  ASSERT_TRUE(cycle_until([&] { return state_.gripper == cell_robot_GRIPPER_CLOSED; }));
+  ASSERT_TRUE(cycle_until([&] { return slave_.control_entries() >= 2; }));
+  for (int i = 0; i < 15; ++i) {  // 0.3 s: the recorder writes every 0.1 s
+    (void)cycle();
+  }
+  auto record = load_homing_record(record_path());
+  ASSERT_THAT(record, IsOk());
+  ASSERT_TRUE(record->has_value()) << "no homing record written";
+  EXPECT_EQ((*record)->gripper, HomingRecord::Gripper::kClosed);
+  for (int j = 0; j < 4; ++j) {
+    EXPECT_NEAR((*record)->counts[static_cast<std::size_t>(j)], state_.q[j] * counts(j), 2);
+  }
+  EXPECT_GT(std::abs((*record)->counts[0]), 1000);
+  const JointVector at_death = state_.q;
+  const int entries = slave_.control_entries();
+
+  // The master dies: no more exchanges. The slave flags torques late and stops control mode.
+  std::this_thread::sleep_for(kPeriod * 5);
+  EXPECT_NE(dpr_.error() & d::kErrTorquesLate, 0) << "the slave did not notice the dead master";
+
+  auto next = successor();
+  ASSERT_THAT(next->on_configure(), IsOk());
+  ASSERT_THAT(next->on_activate(), IsOk());
+  JointState state;
+  EXPECT_NE(run(*next, 1, state), CycleStatus::kFault);
+  EXPECT_TRUE(state.homed) << "the successor did not keep the homing";
+  EXPECT_EQ(state.gripper, cell_robot_GRIPPER_CLOSED);
+  EXPECT_EQ(dpr_.error(), 0) << "the stale 0x1000 was not cleared";
+  EXPECT_EQ(run(*next, 60, state), CycleStatus::kOk);
+  EXPECT_GT(slave_.control_entries(), entries) << "control mode did not start again";
+  for (int j = 0; j < 4; ++j) {
+    EXPECT_LT(std::abs(state.q[j] - at_death[j]) * counts(j), 30) << "joint " << j;
+  }
+  next->on_deactivate();
+}
+
+// A predecessor that died with a gripper close under way: its successor completes the close
+// (the latch is then known) before anything else.
+TEST_F(Dpr7545ReattachTest, AGripperProcedureUnderWayIsCompletedByTheSuccessor) {
+  activate();
+  for (int i = 0; i < 3; ++i) {
+    (void)cycle();
+  }
+  driver_.on_deactivate();
+  HomingRecord record;
+  record.counts = {0, 0, 0, 0};  // the fake board reads 0 everywhere: the arm at home
+  record.gripper = HomingRecord::Gripper::kClosing;
+  ASSERT_THAT(save_homing_record(record_path(), record), IsOk());
+  auto next = successor();
+  ASSERT_THAT(next->on_configure(), IsOk());
+  ASSERT_THAT(next->on_activate(), IsOk());
+  JointState state;
+  (void)run(*next, 1, state);
+  EXPECT_TRUE(state.homed);
+  EXPECT_EQ(state.gripper, cell_robot_GRIPPER_CLOSING);
+  (void)run(*next, 100, state);  // 2 s: leave, the slave's idle loop, its close
+  EXPECT_EQ(state.gripper, cell_robot_GRIPPER_CLOSED);
+  EXPECT_TRUE(slave_.gripper_closed());
+  EXPECT_EQ(slave_.gripper_actions(), 1);
+  next->on_deactivate();
+}
+
+TEST_F(Dpr7545ReattachTest, ARecordThatDoesNotMatchTheBoardIsRemovedAndTheRobotMustBeHomed) {
+  activate();
+  for (int i = 0; i < 3; ++i) {
+    (void)cycle();
+  }
+  driver_.on_deactivate();
+  HomingRecord stale;
+  stale.counts = {50'000, 20'000, 30'000, 1'000};  // the counters read near 0: far from it
+  ASSERT_THAT(save_homing_record(record_path(), stale), IsOk());
+  auto next = successor();
+  ASSERT_THAT(next->on_configure(), IsOk());
+  ASSERT_THAT(next->on_activate(), IsOk());
+  JointState state;
+  (void)run(*next, 10, state);
+  EXPECT_FALSE(state.homed);
+  EXPECT_FALSE(std::filesystem::exists(record_path()));
+  EXPECT_EQ(slave_.control_entries(), 0);
+  next->on_deactivate();
 }
 
 TEST(Dpr7545Config, ParserChecksKeysWithLocations) {

@@ -1,7 +1,9 @@
 #include "motion_service.hpp"
 
 #include <cmath>
+#include <chrono>
 #include <stdexcept>
+#include <thread>
 
 #include <fmt/format.h>
 
@@ -382,8 +384,21 @@ void MotionService::handle_request(const cell_motion_MotionRequest& request) {
   wire.message.request_id.client_id = bus::borrow(client_id_);
   wire.message.request_id.seq = active.gateway_seq;
   wire.message.header.stamp_ns = wall_time_ns();
-  if (auto s = trajectory_writer_.write(wire.message); !s) {
-    refuse(Error{Errc::kBus, s.error().message});
+  // A reliable write blocks while a reader that died (a gateway killed a moment ago, its
+  // successor already up) still holds unacknowledged samples, until the write's 1 s blocking
+  // time: a few tries before the motion is refused (a table job's place was once refused so
+  // and its part left in the gripper).
+  Status written = trajectory_writer_.write(wire.message);
+  for (int attempt = 1; !written && attempt < 4; ++attempt) {
+    log::warn("accept", "trajectory write failed: trying again",
+              {{"motion", motion_id}, {"attempt", std::to_string(attempt)},
+               {"error", written.error().message}});
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));
+    wire.message.header.stamp_ns = wall_time_ns();
+    written = trajectory_writer_.write(wire.message);
+  }
+  if (!written) {
+    refuse(Error{Errc::kBus, written.error().message});
     return;
   }
   robot.active = std::move(active);

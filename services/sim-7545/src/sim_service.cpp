@@ -163,6 +163,7 @@ void SimService::run(service::Context& ctx) {
   auto next = std::chrono::steady_clock::now() + period;
   std::uint16_t last_error = 0;
   std::uint64_t stalls_logged = 0;
+  bool was_homed = false;
   for (;;) {
     const auto now = std::chrono::steady_clock::now();
     const auto timeout = next > now ? std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -190,6 +191,16 @@ void SimService::run(service::Context& ctx) {
         log::info("slave", "error register cleared");
       }
       last_error = s.error;
+    }
+    if (s.homed != was_homed) {
+      // Each homing of the board, once (tests count them: a master that re-attached after
+      // its predecessor died must not have needed one).
+      if (s.homed) {
+        log::info("slave", "homed: every counter zeroed at its index pulse");
+      } else {
+        log::info("slave", "homing started");
+      }
+      was_homed = s.homed;
     }
     if (s.stalls_absorbed != stalls_logged) {
       log::info("slave", "this process stalled inside a handshake wait; the deadline moved by "

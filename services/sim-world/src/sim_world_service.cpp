@@ -91,7 +91,22 @@ SimWorldService::SimWorldService(service::Context& ctx, const SimWorldConfig& co
 void SimWorldService::take_robot_states() {
   (void)robot_state_reader_.take_each([&](const cell_robot_RobotState& s,
                                           const dds_sample_info_t&) {
-    const std::string_view robot_id = bus::str(s.robot_id);
+    std::string_view robot_id = bus::str(s.robot_id);
+    // A simulated controller's own state of its arm (`<robot>.sim`: the joints and the gripper
+    // latch as they physically are) is the truth for <robot>; once it is seen, the gateway's
+    // report of the same robot (what its master believes, e.g. a gripper state a restarted
+    // gateway cannot know) no longer moves the world.
+    constexpr std::string_view kTruthSuffix = ".sim";
+    if (robot_id.size() > kTruthSuffix.size() && robot_id.ends_with(kTruthSuffix)) {
+      robot_id.remove_suffix(kTruthSuffix.size());
+      if (truth_robots_.find(robot_id) == truth_robots_.end()) {
+        truth_robots_.emplace(robot_id);
+        log::info("robot_state", "following the simulator's own state of the robot",
+                  {{"robot", robot_id}, {"from", bus::str(s.robot_id)}});
+      }
+    } else if (truth_robots_.find(robot_id) != truth_robots_.end()) {
+      return;
+    }
     auto pose = world::pose_from_idl(s.base_T_tool);
     if (!pose) {
       log::warn("robot_state", pose.error().message, {{"robot", robot_id}});

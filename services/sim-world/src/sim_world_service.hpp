@@ -67,6 +67,9 @@ class SimWorldService {
   std::uint64_t belt_seq_ = 0;
   std::uint64_t photocell_seq_ = 0;
   std::set<std::string> unknown_robots_;  // warned about once each
+  /// Robots whose simulator publishes their physical state as `<robot>.sim` (cell-sim-7545's
+  /// state_robot_id): the world follows that, not the gateway's report of it.
+  std::set<std::string, std::less<>> truth_robots_;
   std::uint64_t overruns_ = 0;
   /// The wall-clock instant world_.time_s() stands for (its last step's), so that a robot
   /// state (stamped when its joints were read) is compared with the parts at its instant; the
