@@ -116,4 +116,17 @@ echo "table_soak: totals (cumulative over the run): torque $(board_faults 0x0F00
   "$(count "$logs/gateway.ibm7545.log" 'link to the controller failed'); the board's clock" \
   "${behind:-0} s behind the host's" >&2
 [ "$(board_faults 0x3FFF)" -eq 0 ] && [ "$(count "$logs/gateway.ibm7545.log" 'link to the controller failed')" -eq 0 ] || failed=1
+# The servo's own account over the whole run (the gateway logs it every 30 s and when it
+# stops): following error |reference - encoder| p50 / p99 / max and the torque word's peak as
+# a fraction of its range, per joint J1 J2 Z R (services/gateway/src/dpr7545_driver.hpp).
+stop
+trap - EXIT
+line="$(grep 'msg="servo statistics"' "$logs/gateway.ibm7545.log" 2>/dev/null | tail -1)"
+if [ -n "$line" ]; then
+  field() { grep -oE " $1=(\"[^\"]*\"|[^ ]*)" <<<"$line" | cut -d= -f2 | tr -d '"'; }
+  echo "table_soak: servo over $(field exchanges) exchanges (J1 J2 Z R): following error p50" \
+    "$(field error_p50_counts) / p99 $(field error_p99_counts) / max $(field error_max_counts)" \
+    "counts; torque word peak $(field torque_peak_fraction) of its range; setpoint steps" \
+    "absorbed $(field setpoint_steps_absorbed)" >&2
+fi
 exit "$failed"

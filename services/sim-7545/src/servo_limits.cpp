@@ -240,7 +240,10 @@ Result<std::vector<JointJudgement>> judge_robot_limits(const std::string& robot_
     jj.derived = derive_limits(sim->plants[j], (*laws)[j], jj.speed_counts_s, margin);
     jj.at_file_limits =
         simulate_follow(sim->plants[j], (*laws)[j], jj.speed_counts_s, jj.accel_counts_s2);
-    jj.ok = jj.at_file_limits.peak_dac <= jj.derived.usable_dac;
+    // Above the derived acceleration some lower one does not fit (the peak is not monotonic):
+    // a plan may use any acceleration up to the file's.
+    jj.ok = jj.at_file_limits.peak_dac <= jj.derived.usable_dac &&
+            jj.accel_counts_s2 <= jj.derived.accel_counts_s2 * (1.0 + 1e-9);
     out.push_back(std::move(jj));
   }
   return out;
@@ -254,7 +257,7 @@ int run_limits(int argc, char** argv) {
   std::string robot = "config/robots/ibm7545.yaml";
   std::string sim = "config/sim-7545.yaml";
   std::string gateway = "config/gateway-ibm7545-dpr.yaml";
-  double margin = 0.3;
+  double margin = kDefaultMargin;
   app.add_option("--robot", robot, "robot file whose limits are judged");
   app.add_option("--sim", sim, "simulator config: the joints' plants");
   app.add_option("--gateway", gateway, "dpr7545 gateway config: the PD gains and period");

@@ -77,7 +77,9 @@ struct JointJudgement {
   double accel_counts_s2 = 0.0;  ///< the robot file's max acceleration
   FollowableLimits derived;      ///< at the robot file's speed
   FollowResult at_file_limits;   ///< the worst case at the robot file's speed and acceleration
-  bool ok = false;               ///< at_file_limits.peak_dac <= derived.usable_dac
+  /// at_file_limits.peak_dac <= derived.usable_dac, and the file's acceleration not above the
+  /// derived one
+  bool ok = false;
 };
 
 /// Judges every joint of `robot_config` (speeds, accelerations, counts_per_deg / _mm) against
@@ -89,7 +91,13 @@ Result<std::vector<JointJudgement>> judge_robot_limits(const std::string& robot_
                                                        const std::string& gateway_config,
                                                        double margin);
 
-/// `cell-sim-7545 limits [--robot F] [--sim F] [--gateway F] [--margin 0.3]`: prints the
+/// The share of the torque word's range the robot file's limits keep in reserve: 30 % for the
+/// worst case of a plan (the figure) and 10 % for this kind of host's late exchanges.
+/// At 0.3 alone the first ramp of a table job on a loaded 2-core host overflowed J2's word
+/// (153 % of its range after 4 handshake timeouts in 18 periods; tests/crash, 2026-12-07).
+inline constexpr double kDefaultMargin = 0.4;
+
+/// `cell-sim-7545 limits [--robot F] [--sim F] [--gateway F] [--margin 0.4]`: prints the
 /// derivation, joint by joint, and whether the robot file's limits fit. Exit codes: 0 every
 /// joint fits, 1 one does not (or a config failed to load), 2 usage error.
 int run_limits(int argc, char** argv);

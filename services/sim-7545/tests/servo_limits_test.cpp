@@ -30,11 +30,11 @@ const std::string kSim = "config/sim-7545.yaml";
 const std::string kGateway = "config/gateway-ibm7545-dpr.yaml";
 
 // Every joint of the shipped robot file, at its speed and acceleration limits, keeps the
-// torque word within 70 % of its range under the shipped gains and joint model; and its
+// torque word within 60 % of its range under the shipped gains and joint model; and its
 // acceleration limit is the derived one (rounded down, not 5 % short of it): a value the
 // cell's own models determine, not a guess.
-TEST(ServoLimits, TheShippedRobotFileHasTheDerivedLimitsWithThirtyPercentInReserve) {
-  auto judged = judge_robot_limits(source(kRobot), source(kSim), source(kGateway), 0.3);
+TEST(ServoLimits, TheShippedRobotFileHasTheDerivedLimitsWithFortyPercentInReserve) {
+  auto judged = judge_robot_limits(source(kRobot), source(kSim), source(kGateway), kDefaultMargin);
   ASSERT_THAT(judged, IsOk());
   ASSERT_EQ(judged->size(), 4U);
   for (const JointJudgement& j : *judged) {
@@ -85,21 +85,21 @@ class RobotFileRewrite {
 // limits were derived (J1 at 180 deg/s^2, "full speed in 0.25 s", a placeholder) is caught as
 // not the derived value.
 TEST(ServoLimits, ARobotFileBeyondWhatJ1CanFollowOrShortOfItIsCaught) {
-  auto judged = judge_robot_limits(source(kRobot), source(kSim), source(kGateway), 0.3);
+  auto judged = judge_robot_limits(source(kRobot), source(kSim), source(kGateway), kDefaultMargin);
   ASSERT_THAT(judged, IsOk());
   const JointJudgement& j1 = judged->front();
   RobotFileRewrite file;
   const double c = j1.counts_per_unit;
   auto sharp = judge_robot_limits(file.j1(45.0, 1.3 * j1.derived.accel_counts_s2 / c),
-                                  source(kSim), source(kGateway), 0.3);
+                                  source(kSim), source(kGateway), kDefaultMargin);
   ASSERT_THAT(sharp, IsOk());
   EXPECT_FALSE(sharp->front().ok) << sharp->front().at_file_limits.peak_dac;
   EXPECT_TRUE((*sharp)[1].ok);
   auto fast = judge_robot_limits(file.j1(1.05 * j1.derived.speed_ceiling_counts_s / c, 10.0),
-                                 source(kSim), source(kGateway), 0.3);
+                                 source(kSim), source(kGateway), kDefaultMargin);
   ASSERT_THAT(fast, IsOk());
   EXPECT_FALSE(fast->front().ok) << fast->front().at_file_limits.peak_dac;
-  auto placeholder = judge_robot_limits(file.j1(45.0, 180.0), source(kSim), source(kGateway), 0.3);
+  auto placeholder = judge_robot_limits(file.j1(45.0, 180.0), source(kSim), source(kGateway), kDefaultMargin);
   ASSERT_THAT(placeholder, IsOk());
   const JointJudgement& old = placeholder->front();
   EXPECT_TRUE(old.ok);  // it fits: it only wastes the arm
