@@ -308,16 +308,49 @@ void Dpr7545Driver::adopt_homing_record() {
   lights_ = r.lights;
   // A gripper procedure under way when the predecessor died: the latch is as before it or as
   // the procedure leaves it. Completing it makes it known, and does what was asked, where it
-  // was asked (the arm has not moved since: no master, no torque).
+  // was asked (the arm has not moved since: no master, no torque). Done here, before this
+  // gateway serves, so that nobody's next move meets a busy robot.
   if (r.gripper == G::kOpening || r.gripper == G::kClosing) {
-    (void)begin_leave(r.gripper == G::kClosing ? Procedure::kGripperClose
-                                               : Procedure::kGripperOpen);
+    complete_gripper(r.gripper == G::kClosing);
   }
   log::info("dpr7545", "re-attached to the board: its homing kept, the arm held where it stands",
             {{"record", path},
              {"counts", fmt::format("{}, {}, {}, {}", position_[0], position_[1], position_[2],
                                     position_[3])},
              {"gripper", gripper_name(r.gripper)}});
+}
+
+void Dpr7545Driver::complete_gripper(bool close) {
+  const auto until = [&](auto&& done, double timeout_s) {
+    const std::int64_t deadline = now_ns() + static_cast<std::int64_t>(timeout_s * 1e9);
+    while (!done()) {
+      if (now_ns() > deadline) {
+        return false;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    return true;
+  };
+  // The slave looks at the gripper register in its idle loop only: three passes of it seen
+  // through timing_A, as when leaving control mode (begin_leave).
+  bool idle = true;
+  for (int pass = 0; pass < 3 && idle; ++pass) {
+    dpr_->set_timing_a(0);
+    idle = until([&] { return dpr_->timing_a() != 0; }, options_.activate_timeout_s);
+  }
+  if (idle) {
+    dpr_->set_gripper(close ? d::kGripperClose : d::kGripperOpen);
+  }
+  if (!idle || !until([&] { return dpr_->gripper() == 0; }, options_.gripper_timeout_s)) {
+    gripper_ = cell_robot_GRIPPER_UNKNOWN;
+    log::warn("dpr7545", "the gripper procedure under way at the predecessor's death did not "
+                         "complete: the gripper is unknown",
+              {{"procedure", close ? "close" : "open"}});
+    return;
+  }
+  gripper_ = close ? cell_robot_GRIPPER_CLOSED : cell_robot_GRIPPER_OPEN;
+  log::info("dpr7545", "completed the gripper procedure under way at the predecessor's death",
+            {{"procedure", close ? "close" : "open"}});
 }
 
 void Dpr7545Driver::record_homing(const std::stop_token& stop) {

@@ -195,6 +195,9 @@ class Dpr7545Driver final : public RobotDriver {
   void adopt_window() noexcept;
   /// on_activate: adopts the homing record when it matches the board (see the class comment).
   void adopt_homing_record();
+  /// on_activate, after adopting a record with a gripper procedure under way: runs it to its
+  /// end on the slave's idle loop (blocking, up to gripper_timeout_s).
+  void complete_gripper(bool close);
   /// The recorder thread: rewrites the homing record while homed, removes it otherwise, and
   /// logs the servo's statistics every kStatisticsLogS while control mode exchanges.
   void record_homing(const std::stop_token& stop);
