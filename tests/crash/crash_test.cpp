@@ -425,6 +425,15 @@ void CrashTest::run_with_kills(bool dpr, const std::vector<std::string>& order,
       ++homings;
     }
     EXPECT_EQ(homings, 1U) << "the board was homed again after a gateway restart";
+    // The simulator's stalls each gateway waited out (reported, not judged).
+    const std::string gateway_log = read_text(dir_ + "/run/logs/gateway.ibm7545.log");
+    std::size_t stall_lines = 0;
+    for (auto at = gateway_log.find("simulated board stalled"); at != std::string::npos;
+         at = gateway_log.find("simulated board stalled", at + 1)) {
+      ++stall_lines;
+    }
+    std::printf("the gateways reported %zu episodes of the simulated board's stalls\n",
+                stall_lines);
   }
   // One job, one id in the journal.
   int jobs_with_id = 0;

@@ -79,6 +79,11 @@ struct Dpr7545Counters {
   /// Largest |sampling instant - host cycle time| the setpoint was moved by (see write()).
   std::int64_t max_setpoint_skew_ns = 0;
   std::uint64_t rephases = 0;  ///< control mode restarted because its phase was bad
+  /// Cycles whose handshake timed out while the simulator was not running at all (its process
+  /// stalled: no board time passed, the arm stood still): not counted as link failures, up to
+  /// kSimulatorSilentLimitNs of silence (simulator_stalled()). Always 0 on the real card.
+  std::uint64_t simulator_stall_cycles = 0;
+  std::int64_t max_simulator_silence_ns = 0;  ///< the longest such silence seen
 };
 
 /// The IBM 7545 master over the dual-port RAM (digest 000 §2): the gateway is the master, the
@@ -164,6 +169,8 @@ class Dpr7545Driver final : public RobotDriver {
   std::string describe_faults(std::uint32_t bits) const override;
   const DriverInfo& info() const noexcept override { return info_; }
 
+  /// A simulator silent this long is hung or gone: its missing periods count as link failures.
+  static constexpr std::int64_t kSimulatorSilentLimitNs = 1'000'000'000;
   /// Counters since activation (thread-safe snapshot).
   Dpr7545Counters counters() const noexcept;
   /// Following error and torque statistics since activation (thread-safe snapshot).
@@ -185,6 +192,33 @@ class Dpr7545Driver final : public RobotDriver {
   CycleStatus fault(std::uint32_t bits, JointState& state) noexcept;
   bool ready_to_engage(Clock::time_point now) noexcept;
   CycleStatus handshake_read(JointState& state, std::int64_t start) noexcept;
+  CycleStatus read_cycle(Clock::time_point now, JointState& state);
+  /// The link's flight recorder: the last kTraceCycles reads (when, phase, outcome, the
+  /// registers as they were left), written to the log once when as many reads in a row as
+  /// the servo tolerates failed (it then faults on a lost link): what each side was doing.
+  struct TraceEntry {
+    std::int64_t start_ns = 0;
+    std::int64_t spent_ns = 0;
+    std::int64_t simulator_silent_ns = -1;  ///< -1: no simulator's liveness stamp
+    std::uint16_t timing_a = 0;
+    std::uint16_t timing_b = 0;
+    std::uint16_t error = 0;
+    std::uint16_t command = 0;
+    std::uint8_t phase = 0;
+    std::uint8_t status = 0;
+  };
+  static constexpr std::size_t kTraceCycles = 40;
+  void log_link_trace() const;
+  std::array<TraceEntry, kTraceCycles> trace_{};
+  std::size_t trace_next_ = 0;
+  int retries_in_a_row_ = 0;
+  std::uint64_t stalls_logged_ = 0;      ///< simulator_stalls_ at the last "stalled" line
+  std::int64_t stall_logged_ns_ = 0;     ///< when that line was written (at most one per 5 s)
+  /// True when a simulated board's process did not run at all for more than two periods
+  /// before `now` (its control block's liveness stamp), but less than
+  /// kSimulatorSilentLimitNs, and its process exists: a period it did not start is its own
+  /// stall, not a lost link. The real card (no control block): always false.
+  bool simulator_stalled(std::int64_t now) noexcept;
   void track_sample(std::int64_t seen, bool started_before) noexcept;
   void check_phase(bool started_before, std::int64_t waited_ns) noexcept;
   void start_procedure() noexcept;
@@ -282,6 +316,8 @@ class Dpr7545Driver final : public RobotDriver {
 
   std::atomic<std::uint64_t> periods_{0};
   std::atomic<std::uint64_t> timeouts_{0};
+  std::atomic<std::uint64_t> simulator_stalls_{0};
+  std::atomic<std::int64_t> max_simulator_silence_ns_{0};
   std::atomic<std::uint64_t> deadline_errors_{0};
   std::atomic<std::uint64_t> engages_{0};
   std::atomic<std::int64_t> max_wait_ns_{0};

@@ -693,6 +693,39 @@ TEST_F(Dpr7545DriverTest, SilentSlaveGivesBoundedRetriesNotABlockedCycle) {
   slave_.stall = false;
 }
 
+// A simulated board whose process does not run (its liveness stamp stands still: a VM's CPU
+// taken away) starts no period, but no board time passes and its arm stands still: the master
+// waits for it without counting a link failure, and counts the cycles. One that runs and does
+// not answer, one silent past the limit, and the real card (no control block) are retried.
+TEST_F(Dpr7545DriverTest, AStalledSimulatorIsWaitedForAndCountedNotTakenForALostLink) {
+  const d::SimControl control(memory_->window());
+  control.initialise(static_cast<std::uint32_t>(::getpid()));
+  control.set_grace_us(kPeriodUs);
+  home_and_engage();
+  slave_.stall = true;
+  std::this_thread::sleep_for(3 * kPeriod);  // let the running period end
+  const auto stalled_for = [&](std::int64_t silent_ns) {
+    control.set_alive_ns(mono_ns() - silent_ns);
+    return cycle();
+  };
+  // Silent for 10 periods: its own stall. The path stands still with the arm.
+  for (int i = 0; i < 4; ++i) {
+    const CycleStatus s = stalled_for(10 * kPeriodUs * 1000LL);
+    ASSERT_NE(s, CycleStatus::kFault) << "cycle " << i;
+    EXPECT_EQ(s, CycleStatus::kOk) << "cycle " << i;
+    EXPECT_EQ(state_.clock_advance_s, 0.0);
+  }
+  EXPECT_GE(driver_.counters().simulator_stall_cycles, 3U);
+  EXPECT_GE(driver_.counters().max_simulator_silence_ns, 10 * kPeriodUs * 1000LL);
+  const std::uint64_t stalls = driver_.counters().simulator_stall_cycles;
+  // Running (stamped just now) and not answering: a link failure.
+  EXPECT_EQ(stalled_for(0), CycleStatus::kRetry);
+  // Silent past the limit: hung or gone, a link failure too.
+  EXPECT_EQ(stalled_for(Dpr7545Driver::kSimulatorSilentLimitNs + 1'000'000), CycleStatus::kRetry);
+  EXPECT_EQ(driver_.counters().simulator_stall_cycles, stalls);
+  slave_.stall = false;
+}
+
 // A master that dies mid-control (it stops exchanging: the slave flags torques late and drops
 // its DACs) is followed by one that re-attaches: the homing record (homing_record.hpp) matches
 // the board, so the successor is homed at once, clears the stale deadline bit, and holds the

@@ -196,6 +196,7 @@ void Slave::service_mailbox() noexcept {
 }
 
 void Slave::publish() noexcept {
+  control_.set_alive_ns(now_ns());  // every loop passes here at least once a period
   std::unique_lock lock(mutex_, std::try_to_lock);
   if (!lock.owns_lock()) {
     return;  // the publisher is copying: the next pass publishes
@@ -311,6 +312,7 @@ std::int64_t Slave::absorb_own_stall(std::int64_t& last_look_ns, std::int64_t& d
   // simulated time passed for the deadline either, so the master gets that time back. A master
   // that is late while this process runs is still flagged, as the board would.
   const std::int64_t now = now_ns();
+  control_.set_alive_ns(now);
   const std::int64_t gap = now - last_look_ns;
   last_look_ns = now;
   if (gap > kOwnStallNs) {
@@ -342,6 +344,7 @@ void Slave::control_mode() {
     // process's scheduling does not turn into position error (the real board samples on its
     // timer's exact grid, which the master tracks instead).
     advance_to(board);
+    control_.set_alive_ns(start);
     control_.set_sample_time_ns(start);
     control_.set_board_time_ns(board);
     late_max_us_ = std::max(late_max_us_, static_cast<double>(start - grid) * 1e-3);

@@ -26,6 +26,7 @@ MotionOutcome outcome_of(const cell_motion_MotionStatus& s) {
   MotionOutcome o;
   o.state = s.state;
   o.reason = std::string(bus::str(s.reason));
+  o.error_code = std::string(bus::str(s.error_code));
   o.final_joints = bus::to_vector(s.final_joints_rad_or_mm);
   return o;
 }

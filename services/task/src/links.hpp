@@ -60,6 +60,9 @@ struct RobotView {
 struct MotionOutcome {
   cell_motion_MotionState state = cell_motion_MOTION_FAILED;
   std::string reason;
+  /// The motion service's code for a refusal or failure (to_string(Errc): "not_ready",
+  /// "out_of_range", ...): what the task decides by; the reason is for people.
+  std::string error_code;
   std::vector<double> final_joints;
   Interrupt interrupted = Interrupt::kNone;
   bool robot_fault = false;  ///< it failed because the robot faulted (the job pauses)

@@ -20,6 +20,7 @@ constexpr std::size_t kResult = 0x1C;
 constexpr std::size_t kSampleTime = 0x20;  // 8 bytes, 8-aligned (the window is page-aligned)
 constexpr std::size_t kBoardTime = 0x28;   // 8 bytes
 constexpr std::size_t kGrace = 0x30;       // 4 bytes
+constexpr std::size_t kAlive = 0x38;       // 8 bytes
 
 struct Name {
   SimFault fault;
@@ -90,6 +91,10 @@ std::int64_t SimControl::board_time_ns() const noexcept { return load64(kBoardTi
 void SimControl::set_grace_us(std::uint32_t us) const noexcept { store(kGrace, us); }
 
 std::uint32_t SimControl::grace_us() const noexcept { return load(kGrace); }
+
+void SimControl::set_alive_ns(std::int64_t t) const noexcept { store64(kAlive, t); }
+
+std::int64_t SimControl::alive_ns() const noexcept { return load64(kAlive); }
 
 void SimControl::initialise(std::uint32_t owner_pid) const noexcept {
   store(kOwner, owner_pid);

@@ -32,6 +32,11 @@
 ///   +0x30 the simulator's grace past each deadline, us (uint32; 0 = the board's own timing):
 ///         how late a master it serves, and so how long a master may wait for it (its own
 ///         stalls) before the link counts as lost
+///   +0x38 the simulator's latest pass through any of its loops, CLOCK_MONOTONIC ns (int64): a
+///         live simulator passes at least once a period. A master that waited for a period
+///         start in vain while this stood still knows the simulator was not running (its
+///         process was stalled: no board time passed, the arm stood still), which is not a
+///         lost link; one that stands still for good is (services/gateway/README.md).
 /// A requester writes kind/joint/value, then increments the request sequence (release); the
 /// simulator takes it (acquire), acts, writes the result and sets the acknowledged sequence to
 /// the request's. One requester at a time (the mailbox has one slot).
@@ -110,6 +115,10 @@ class SimControl {
   void set_grace_us(std::uint32_t us) const noexcept;
   /// Master: that grace; 0 when none (the board's own timing, or an older simulator).
   std::uint32_t grace_us() const noexcept;
+  /// Simulator: it is running now, at CLOCK_MONOTONIC `t` [ns] (relaxed: a liveness stamp).
+  void set_alive_ns(std::int64_t t) const noexcept;
+  /// Master: the simulator's latest pass [ns]; 0 from a simulator that does not write it.
+  std::int64_t alive_ns() const noexcept;
 
  private:
   std::uint32_t load(std::size_t field) const noexcept;
