@@ -12,7 +12,7 @@ endfunction()
 
 # The unit tests' own code: -O1 in an optimised build; it sets up and checks, the libraries it
 # tests do the work (and keep the build type's -O2). Half the build is test code; -O1 cuts its
-# compile by a fifth. In the sanitizer build (CELL_SANITIZE: libraries and services at -O1) the
+# compile by a fifth. In the sanitizer build (CELL_SANITIZE: libraries and services at -Og) the
 # test code is compiled at -O0: ASan and UBSan instrument it all the same, nothing of it is
 # optimised away from them, and the instrumented compile of a test batch takes 35 s instead of
 # 60 (gateway_test, measured), which is a fifth of the sanitizer build. Except where the test's

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The sanitizer run: a second build of the libraries, services, clients and their unit tests
-# with AddressSanitizer and UndefinedBehaviorSanitizer (-O1, the test code -O0, frame pointers;
+# with AddressSanitizer and UndefinedBehaviorSanitizer (-Og, the test code -O0, frame pointers;
 # CELL_SANITIZE in CMakeLists.txt, CELL_TEST_CODE_OPT in cmake/CellTargets.cmake) in
 # ./build-asan, then every unit test. The multi-process tests under tests/ and the benchmarks
 # are not in this build (they run on the normal one, scripts/test.sh).

@@ -710,13 +710,13 @@ TEST_F(Dpr7545DriverTest, AStalledSimulatorIsWaitedForAndCountedNotTakenForALost
   };
   // Silent for 10 periods: its own stall. The path stands still with the arm.
   for (int i = 0; i < 4; ++i) {
-    const CycleStatus s = stalled_for(10 * kPeriodUs * 1000LL);
+    const CycleStatus s = stalled_for(10LL * kPeriodUs * 1000);
     ASSERT_NE(s, CycleStatus::kFault) << "cycle " << i;
     EXPECT_EQ(s, CycleStatus::kOk) << "cycle " << i;
     EXPECT_EQ(state_.clock_advance_s, 0.0);
   }
   EXPECT_GE(driver_.counters().simulator_stall_cycles, 3U);
-  EXPECT_GE(driver_.counters().max_simulator_silence_ns, 10 * kPeriodUs * 1000LL);
+  EXPECT_GE(driver_.counters().max_simulator_silence_ns, 10LL * kPeriodUs * 1000);
   const std::uint64_t stalls = driver_.counters().simulator_stall_cycles;
   // Running (stamped just now) and not answering: a link failure.
   EXPECT_EQ(stalled_for(0), CycleStatus::kRetry);
