@@ -214,7 +214,7 @@ class Dpr7545Driver final : public RobotDriver {
   int retries_in_a_row_ = 0;
   std::uint64_t stalls_logged_ = 0;      ///< simulator_stalls_ at the last "stalled" line
   std::int64_t stall_logged_ns_ = 0;     ///< when that line was written (at most one per 5 s)
-  /// True when a simulated board's process did not run at all for more than two periods
+  /// True when a simulated board's process did not run at all for more than five periods
   /// before `now` (its control block's liveness stamp), but less than
   /// kSimulatorSilentLimitNs, and its process exists: a period it did not start is its own
   /// stall, not a lost link. The real card (no control block): always false.
