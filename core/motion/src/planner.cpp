@@ -37,6 +37,21 @@ Result<trajectory::JointTrajectory> join(const trajectory::JointTrajectory& a,
 Planner::Planner(kinematics::RobotModel model, PlannerOptions options)
     : model_(std::move(model)), options_(options), limits_(joint_limits(model_)) {}
 
+trajectory::JointVector Planner::start_within_limits(const trajectory::JointVector& q) const {
+  trajectory::JointVector out = q;
+  for (Eigen::Index j = 0; j < out.size() && j < limits_.lower.size(); ++j) {
+    const double tolerance = limits_.prismatic[static_cast<std::size_t>(j)]
+                                 ? options_.start_bounds_tolerance_mm
+                                 : options_.start_bounds_tolerance_rad;
+    if (out[j] < limits_.lower[j] && out[j] >= limits_.lower[j] - tolerance) {
+      out[j] = limits_.lower[j];
+    } else if (out[j] > limits_.upper[j] && out[j] <= limits_.upper[j] + tolerance) {
+      out[j] = limits_.upper[j];
+    }
+  }
+  return out;
+}
+
 Status Planner::check_pose(const Eigen::Isometry3d& base_T_tool, const char* what) const {
   if (!base_T_tool.matrix().allFinite()) {
     return Error{Errc::kInvalidArgument, fmt::format("{}: pose is not finite", what)};

@@ -116,6 +116,37 @@ TEST(Planner, RefusesTargetsOutsideTheWorkspaceAndSaysWhy) {
               IsErrWith(Errc::kInvalidArgument, "speed_scale"));
 }
 
+// A start read just past a limit (the Excalibur left at theta4 = 180 deg reads 180.2: its
+// potentiometers' accuracy) is planned from the limit; one further past stays refused. tests/crash
+// found it: a restarted Excalibur gateway read 180.20 deg and the arm could not move again.
+TEST(Planner, AStartJustPastALimitIsPlannedFromTheLimitAndOneFurtherIsRefused) {
+  const Planner excalibur(robot("excalibur"), PlannerOptions{});
+  const trajectory::JointVector read =
+      jv({0, deg(30), deg(-150), deg(180.2), deg(40), 0});
+  const trajectory::JointVector start = excalibur.start_within_limits(read);
+  EXPECT_DOUBLE_EQ(start[3], deg(180));
+  for (const Eigen::Index j : {0, 1, 2, 4, 5}) {
+    EXPECT_EQ(start[j], read[j]) << "joint " << j << " was within its limits";
+  }
+  // A straight line checks its start (the assembly job's moves are straight lines).
+  auto goal = excalibur.model().forward(jv({0, deg(30), deg(-150), deg(170), deg(40), 0}));
+  ASSERT_TRUE(goal);
+  EXPECT_THAT(excalibur.move_linear(read, *goal, 1.0),
+              IsErrWith(Errc::kOutOfRange, "start: joint theta4"));
+  auto plan = excalibur.move_linear(start, *goal, 1.0);
+  ASSERT_THAT(plan, IsOk());
+  EXPECT_DOUBLE_EQ(plan->trajectory.sample(0).q[3], deg(180));
+  // 1 deg past: not the sensors' accuracy; left as read, and refused.
+  const trajectory::JointVector far = jv({0, deg(30), deg(-150), deg(181), deg(40), 0});
+  EXPECT_EQ(excalibur.start_within_limits(far)[3], deg(181));
+  EXPECT_THAT(excalibur.move_linear(excalibur.start_within_limits(far), *goal, 1.0),
+              IsErrWith(Errc::kOutOfRange, "start: joint theta4"));
+  // A prismatic joint, in mm: the 7545's Z read 0.3 mm above the top of its stroke.
+  const Planner scara(robot("ibm7545"), PlannerOptions{});
+  EXPECT_EQ(scara.start_within_limits(jv({deg(45), deg(105), -0.3, 0}))[2], 0.0);
+  EXPECT_EQ(scara.start_within_limits(jv({deg(45), deg(105), -0.8, 0}))[2], -0.8);
+}
+
 // Home -> image window takes 2.30 s in the thesis (digest 000 §9.2 case 13), but its cubic
 // then peaks at 1.5 x 105 deg / 2.3 s = 68.5 deg/s on J2, beyond the 50 deg/s it was sized
 // with. The planner keeps the sizing rule and slows down until the peak respects the limit:

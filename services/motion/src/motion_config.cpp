@@ -25,6 +25,13 @@ void read_planner(config::MapReader& p, motion::PlannerOptions& out) {
   p.optional("gripper_dwell_s", out.gripper_dwell_s);
   p.optional("approach_mm", out.default_approach_mm);
   p.optional("via_settle_s", out.via_settle_s);
+  double start_bounds_deg = out.start_bounds_tolerance_rad * 180 / std::numbers::pi;
+  p.optional("start_bounds_tolerance_deg", start_bounds_deg);
+  out.start_bounds_tolerance_rad = start_bounds_deg * std::numbers::pi / 180;
+  p.optional("start_bounds_tolerance_mm", out.start_bounds_tolerance_mm);
+  if (!(start_bounds_deg >= 0) || !(out.start_bounds_tolerance_mm >= 0)) {
+    p.fail("start_bounds_tolerance_deg", "start bounds tolerances must be >= 0");
+  }
   auto positive = [&](const char* key, double v) {
     if (!(v > 0)) {
       p.fail(key, fmt::format("must be > 0, got {}", v));

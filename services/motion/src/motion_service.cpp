@@ -158,7 +158,8 @@ Result<motion::Plan> MotionService::plan(const cell_motion_MotionRequest& reques
   const motion::Planner& planner = *robot.planner;
   const int dof = planner.model().dof();
   const double scale = request.speed_scale == 0.0 ? 1.0 : request.speed_scale;
-  const trajectory::JointVector& q0 = robot.view.q;
+  // Planned from the measured joints, a joint read just past a limit put on it.
+  const trajectory::JointVector q0 = planner.start_within_limits(robot.view.q);
   auto target = [&]() { return motion::from_idl(request.target); };
   switch (bus::raw(request.kind)) {  // any value may come off the wire
     case cell_motion_MOTION_MOVE_JOINTS: {

@@ -43,6 +43,13 @@ struct PlannerOptions {
   double default_approach_mm = 30.0;     ///< approach/depart distance when a request gives 0
   /// Settle time added to each via-point segment (thesis: 0.2 s).
   double via_settle_s = 0.2;
+  /// A measured start this little beyond a joint limit is planned from the limit (MoveIt's
+  /// start_state_max_bounds_error): an arm left at a limit reads past it by its sensors'
+  /// accuracy (the Excalibur's potentiometers: +-0.3 deg), and a start refused for that could
+  /// never move again. The gateways take a path that starts within their start tolerance of
+  /// the arm (0.5 deg, 0.5 mm as shipped): these must not exceed it.
+  double start_bounds_tolerance_rad = 0.5 * 3.141592653589793 / 180.0;
+  double start_bounds_tolerance_mm = 0.5;
 };
 
 /// Plans every motion the motion service offers for one robot: from the current joints to a
@@ -56,6 +63,11 @@ struct PlannerOptions {
 class Planner {
  public:
   Planner(kinematics::RobotModel model, PlannerOptions options);
+
+  /// The measured joints `q` as a start to plan from: a joint beyond its limit by no more
+  /// than the start bounds tolerance (PlannerOptions) is put on the limit; any other stays as
+  /// it is (and a plan from it is refused with the joint and its limit).
+  trajectory::JointVector start_within_limits(const trajectory::JointVector& q) const;
 
   /// Joint-interpolated move to joints q1.
   Result<Plan> move_joints(const trajectory::JointVector& q0, const trajectory::JointVector& q1,
