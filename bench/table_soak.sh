@@ -127,6 +127,7 @@ if [ -n "$line" ]; then
   echo "table_soak: servo over $(field exchanges) exchanges (J1 J2 Z R): following error p50" \
     "$(field error_p50_counts) / p99 $(field error_p99_counts) / max $(field error_max_counts)" \
     "counts; torque word peak $(field torque_peak_fraction) of its range; setpoint steps" \
-    "absorbed $(field setpoint_steps_absorbed)" >&2
+    "absorbed $(field setpoint_steps_absorbed); periods the simulator stalled (waited out," \
+    "the arm still) $(field simulator_stall_cycles)" >&2
 fi
 exit "$failed"

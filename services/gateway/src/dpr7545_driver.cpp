@@ -820,6 +820,7 @@ CycleStatus Dpr7545Driver::read(Clock::time_point now, JointState& state) {
     e.command = dpr_->command();
     e.phase = static_cast<std::uint8_t>(phase_);
     e.status = static_cast<std::uint8_t>(status);
+    e.exchanged = false;
   }
   // The simulator's stalls, reported as they end (at most a line per 5 s, with the count).
   const std::uint64_t stalls = simulator_stalls_.load(std::memory_order_relaxed);
@@ -838,7 +839,49 @@ CycleStatus Dpr7545Driver::read(Clock::time_point now, JointState& state) {
   if (retries_in_a_row_ == info_.link_retries + 1) {
     log_link_trace();
   }
+  // A torque word the slave rejected: what the PD law did in the exchanges before it, once
+  // per fault (a fault that nothing explains cannot be fixed: the soak's faults said only the
+  // last word).
+  if (status == CycleStatus::kFault) {
+    constexpr std::uint32_t kTorqueBits =
+        d::kErrTorqueJ1 | d::kErrTorqueJ2 | d::kErrTorqueZ | d::kErrTorqueR;
+    if ((latched_bits_ & kTorqueBits) != 0 && !torque_trace_logged_) {
+      log_torque_trace(latched_bits_);
+      torque_trace_logged_ = true;
+    }
+  } else {
+    torque_trace_logged_ = false;
+  }
   return status;
+}
+
+void Dpr7545Driver::log_torque_trace(std::uint32_t bits) const {
+  std::string text;
+  const std::size_t n = std::min(trace_next_, kTraceCycles);
+  const std::int64_t last = trace_[(trace_next_ - 1) % kTraceCycles].start_ns;
+  for (std::size_t k = 0; k < n; ++k) {
+    const TraceEntry& e = trace_[(trace_next_ - n + k) % kTraceCycles];
+    text += fmt::format("{}{:.3f}ms:{}/{}", k == 0 ? "" : "; ",
+                        static_cast<double>(e.start_ns - last) * 1e-6, static_cast<int>(e.phase),
+                        static_cast<int>(e.status));
+    if (!e.exchanged) {
+      text += " -";
+      continue;
+    }
+    text += fmt::format(" gap={:.0f}us path={:.0f}us d={:.0f}us", e.sample_gap_us,
+                        e.path_advance_us, e.derivative_us);
+    for (int j = 0; j < kJoints; ++j) {
+      const auto i = idx(j);
+      text += fmt::format(" {}:{:.1f}/{:.1f}/{:.1f}/{:+d}", d::kJointNames[i], e.desired[i],
+                          e.actual[i], e.offset[i], d::torque_dac(e.word[i]));
+    }
+  }
+  log::warn("dpr7545", "a torque word was rejected: the last exchanges",
+            {{"bits", fmt::format("{:#06x}", bits)},
+             {"exchanges", text},
+             {"legend", "start relative to the last read: phase/status(0 ok,1 retry,2 fault), "
+                        "sample gap, path advance (-1: host clock), D interval; per joint "
+                        "reference/encoder/offset [counts]/DAC value (+-2047 valid)"}});
 }
 
 void Dpr7545Driver::log_link_trace() const {
@@ -1094,6 +1137,20 @@ CycleStatus Dpr7545Driver::write(Clock::time_point now, const JointSetpoint& set
   }
   if (!fresh_engage_) {
     account(error_);
+  }
+  if (trace_next_ > 0) {  // this cycle's entry (read() made it)
+    TraceEntry& t = trace_[(trace_next_ - 1) % kTraceCycles];
+    t.exchanged = true;
+    for (int j = 0; j < kJoints; ++j) {
+      const auto i = idx(j);
+      t.desired[i] = static_cast<float>(last_desired_[i]);
+      t.actual[i] = static_cast<float>(position_[i]);
+      t.offset[i] = static_cast<float>(offset_[i]);
+      t.word[i] = words_[i];
+    }
+    t.sample_gap_us = static_cast<float>(static_cast<double>(sample_gap_ns_) * 1e-3);
+    t.path_advance_us = static_cast<float>(clock_advance_s_ < 0 ? -1.0 : clock_advance_s_ * 1e6);
+    t.derivative_us = static_cast<float>(derivative_s * 1e6);
   }
   fresh_engage_ = false;
   have_last_desired_ = sized && with_rate;

@@ -206,9 +206,22 @@ class Dpr7545Driver final : public RobotDriver {
     std::uint16_t command = 0;
     std::uint8_t phase = 0;
     std::uint8_t status = 0;
+    // The exchange's PD step (write()), per joint J1 J2 Z R [counts, DAC words]; `exchanged`
+    // false when no torques went out in this cycle.
+    bool exchanged = false;
+    std::array<float, dpr7545::kJoints> desired{};  ///< the host's reference at the sample
+    std::array<float, dpr7545::kJoints> actual{};   ///< the encoder
+    std::array<float, dpr7545::kJoints> offset{};   ///< bumpless offset still being closed
+    std::array<std::uint16_t, dpr7545::kJoints> word{};
+    float sample_gap_us = 0;    ///< board (or host) time since the last sample
+    float path_advance_us = 0;  ///< how far the path moved this cycle (-1: the host's clock)
+    float derivative_us = 0;    ///< the D term's interval
   };
   static constexpr std::size_t kTraceCycles = 40;
   void log_link_trace() const;
+  /// The last exchanges' PD steps, logged once when the slave rejects a torque word.
+  void log_torque_trace(std::uint32_t bits) const;
+  bool torque_trace_logged_ = false;
   std::array<TraceEntry, kTraceCycles> trace_{};
   std::size_t trace_next_ = 0;
   int retries_in_a_row_ = 0;
