@@ -859,8 +859,9 @@ void Dpr7545Driver::log_torque_trace(std::uint32_t bits) const {
   std::string text;
   const std::size_t n = std::min(trace_next_, kTraceCycles);
   const std::int64_t last = trace_[(trace_next_ - 1) % kTraceCycles].start_ns;
+  // Newest first: the log cuts a long value at its end, and the last exchanges matter most.
   for (std::size_t k = 0; k < n; ++k) {
-    const TraceEntry& e = trace_[(trace_next_ - n + k) % kTraceCycles];
+    const TraceEntry& e = trace_[(trace_next_ - 1 - k) % kTraceCycles];
     text += fmt::format("{}{:.3f}ms:{}/{}", k == 0 ? "" : "; ",
                         static_cast<double>(e.start_ns - last) * 1e-6, static_cast<int>(e.phase),
                         static_cast<int>(e.status));
@@ -879,17 +880,19 @@ void Dpr7545Driver::log_torque_trace(std::uint32_t bits) const {
   log::warn("dpr7545", "a torque word was rejected: the last exchanges",
             {{"bits", fmt::format("{:#06x}", bits)},
              {"exchanges", text},
-             {"legend", "start relative to the last read: phase/status(0 ok,1 retry,2 fault), "
-                        "sample gap, path advance (-1: host clock), D interval; per joint "
-                        "reference/encoder/offset [counts]/DAC value (+-2047 valid)"}});
+             {"legend", "newest first, start relative to the last read: phase/status(0 ok, "
+                        "1 retry, 2 fault), sample gap, path advance (-1: host clock), D "
+                        "interval; per joint reference/encoder/offset [counts]/DAC value "
+                        "(+-2047 valid)"}});
 }
 
 void Dpr7545Driver::log_link_trace() const {
   std::string text;
   const std::size_t n = std::min(trace_next_, kTraceCycles);
   const std::int64_t last = trace_[(trace_next_ - 1) % kTraceCycles].start_ns;
+  // Newest first: the log cuts a long value at its end, and the last exchanges matter most.
   for (std::size_t k = 0; k < n; ++k) {
-    const TraceEntry& e = trace_[(trace_next_ - n + k) % kTraceCycles];
+    const TraceEntry& e = trace_[(trace_next_ - 1 - k) % kTraceCycles];
     text += fmt::format("{}{:.3f}ms:{}/{}/{:.0f}us a={:#x} b={:#x} err={:#x} cmd={:#x} sim_silent={}",
                         k == 0 ? "" : "; ", static_cast<double>(e.start_ns - last) * 1e-6,
                         static_cast<int>(e.phase), static_cast<int>(e.status),
@@ -903,8 +906,8 @@ void Dpr7545Driver::log_link_trace() const {
   log::warn("dpr7545", "the link failed in every one of the last reads: the last reads",
             {{"retries_in_a_row", std::to_string(retries_in_a_row_)},
              {"reads", text},
-             {"legend", "start relative to the last: phase/status(0 ok,1 retry,2 fault)/time "
-                        "spent, registers after the read"}});
+             {"legend", "newest first, start relative to the last: phase/status(0 ok, 1 "
+                        "retry, 2 fault)/time spent, registers after the read"}});
 }
 
 CycleStatus Dpr7545Driver::read_cycle(Clock::time_point now, JointState& state) {
