@@ -165,10 +165,11 @@ void SimService::run(service::Context& ctx) {
   std::uint64_t stalls_logged = 0;
   bool was_homed = false;
   for (;;) {
-    // Until the next state's time to the nanosecond: a timeout cut to whole milliseconds was 0
-    // for the last millisecond of every period, and this thread spun through it (37 % of a
-    // core at 100 Hz, taken from the services beside it on a 2-core machine).
-    const bus::Fired fired = waitset.wait_until(next);
+    const auto now = std::chrono::steady_clock::now();
+    const auto timeout = next > now ? std::chrono::duration_cast<std::chrono::milliseconds>(
+                                          next - now)
+                                    : std::chrono::milliseconds(0);
+    const bus::Fired fired = waitset.wait(timeout);
     if (fired.contains(kStop)) {
       break;
     }
