@@ -88,12 +88,7 @@ std::vector<Row> measure_controller(const pe::Dialect& dialect, const Case& c, i
     s.busy_after_line_s = 0.008;
     s.reply_delay_s = 0.002;
   }
-  // Both ends at the shipped SCHED_FIFO priorities (config/sim-excalibur.yaml 45, the gateway's
-  // link 40; normal scheduling where not permitted): at normal priority, under a loaded
-  // ctest, the controller's reader once took two paced characters in one read and answered
-  // the move with an overrun ("ER 3") that the shipped link never sees.
-  auto sim = pe::SimulatedController::start(
-      dialect, s, {.baud = c.baud, .emulate_baud = c.paced, .realtime_priority = 45});
+  auto sim = pe::SimulatedController::start(dialect, s, {.baud = c.baud, .emulate_baud = c.paced});
   if (!sim) {
     broke(sim.error().message);
   }
@@ -106,7 +101,6 @@ std::vector<Row> measure_controller(const pe::Dialect& dialect, const Case& c, i
   // the host must stretch every character to 1.5 ms, so the line is no faster than 9600.
   o.char_delay_s = c.paced ? std::max(dialect.timing().char_delay_s, 0.0015 - 10.0 / c.baud) : 0.0;
   o.command_delay_s = 0.0;  // kept by this loop, outside the timed part
-  o.realtime_priority = 40;
   const double command_delay_s = c.paced ? dialect.timing().command_delay_s : 0.0;
   auto port =
       pe::SerialPort::open(o, [&](std::string_view l) { return dialect.looks_unsolicited(l); });
