@@ -500,6 +500,24 @@ void MotionService::supervise() {
     }
     if (v.trajectory_id != a.trajectory_id) {
       if (!a.started) {
+        // Not started yet. A robot in fault or stopped runs no trajectory (the gateway's servo
+        // drops a plan that finds it so): this one never will. Without this the motion waited
+        // for ever, and the task failed the job after its 120 s (the README's run, a deadline
+        // fault 30 ms after the gateway accepted a place). 0.3 s of it is a verdict, as below.
+        if (v.mode == cell_robot_MODE_FAULT || v.mode == cell_robot_MODE_STOPPED) {
+          if (a.mismatch_since == SteadyTime{}) {
+            a.mismatch_since = steady_clock::now();
+          } else if (seconds_since(a.mismatch_since) > 0.3) {
+            const bool fault = v.mode == cell_robot_MODE_FAULT;
+            const Error error =
+                fault ? Error{Errc::kProtocol,
+                              fmt::format("robot '{}' faulted: {}", id, v.fault_text)}
+                      : Error{Errc::kNotReady, fmt::format("robot '{}' was stopped", id)};
+            finish(robot, cell_motion_MOTION_FAILED, &error);
+          }
+        } else {
+          a.mismatch_since = SteadyTime{};
+        }
         continue;  // the gateway has not started it yet
       }
       // It ran and the robot now names another (or none): its gateway restarted or dropped it.
