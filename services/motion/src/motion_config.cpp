@@ -29,8 +29,12 @@ void read_planner(config::MapReader& p, motion::PlannerOptions& out) {
   p.optional("start_bounds_tolerance_deg", start_bounds_deg);
   out.start_bounds_tolerance_rad = start_bounds_deg * std::numbers::pi / 180;
   p.optional("start_bounds_tolerance_mm", out.start_bounds_tolerance_mm);
-  if (!(start_bounds_deg >= 0) || !(out.start_bounds_tolerance_mm >= 0)) {
-    p.fail("start_bounds_tolerance_deg", "start bounds tolerances must be >= 0");
+  if (!(start_bounds_deg >= 0)) {
+    p.fail("start_bounds_tolerance_deg", fmt::format("must be >= 0, got {}", start_bounds_deg));
+  }
+  if (!(out.start_bounds_tolerance_mm >= 0)) {
+    p.fail("start_bounds_tolerance_mm",
+           fmt::format("must be >= 0, got {}", out.start_bounds_tolerance_mm));
   }
   auto positive = [&](const char* key, double v) {
     if (!(v > 0)) {

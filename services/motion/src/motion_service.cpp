@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <chrono>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 
@@ -498,22 +499,29 @@ void MotionService::supervise() {
       finish(robot, cell_motion_MOTION_FAILED, &error);
       continue;
     }
+    // A robot in fault or stopped: the reason its motion fails (none while it may run).
+    // (An init-capture: clang before 16 cannot capture a structured binding.)
+    const auto halted_error = [&v, &robot_id = id]() -> std::optional<Error> {
+      if (v.mode == cell_robot_MODE_FAULT) {
+        return Error{Errc::kProtocol,
+                     fmt::format("robot '{}' faulted: {}", robot_id, v.fault_text)};
+      }
+      if (v.mode == cell_robot_MODE_STOPPED) {
+        return Error{Errc::kNotReady, fmt::format("robot '{}' was stopped", robot_id)};
+      }
+      return std::nullopt;
+    };
     if (v.trajectory_id != a.trajectory_id) {
       if (!a.started) {
         // Not started yet. A robot in fault or stopped runs no trajectory (the gateway's servo
         // drops a plan that finds it so): this one never will. Without this the motion waited
         // for ever, and the task failed the job after its 120 s (the README's run, a deadline
         // fault 30 ms after the gateway accepted a place). 0.3 s of it is a verdict, as below.
-        if (v.mode == cell_robot_MODE_FAULT || v.mode == cell_robot_MODE_STOPPED) {
+        if (const auto halted = halted_error(); halted) {
           if (a.mismatch_since == SteadyTime{}) {
             a.mismatch_since = steady_clock::now();
           } else if (seconds_since(a.mismatch_since) > 0.3) {
-            const bool fault = v.mode == cell_robot_MODE_FAULT;
-            const Error error =
-                fault ? Error{Errc::kProtocol,
-                              fmt::format("robot '{}' faulted: {}", id, v.fault_text)}
-                      : Error{Errc::kNotReady, fmt::format("robot '{}' was stopped", id)};
-            finish(robot, cell_motion_MOTION_FAILED, &error);
+            finish(robot, cell_motion_MOTION_FAILED, &*halted);
           }
         } else {
           a.mismatch_since = SteadyTime{};
@@ -535,12 +543,8 @@ void MotionService::supervise() {
     }
     a.started = true;
     a.mismatch_since = SteadyTime{};
-    if (v.mode == cell_robot_MODE_FAULT) {
-      const Error error{Errc::kProtocol, fmt::format("robot '{}' faulted: {}", id, v.fault_text)};
-      finish(robot, cell_motion_MOTION_FAILED, &error);
-    } else if (v.mode == cell_robot_MODE_STOPPED) {
-      const Error error{Errc::kNotReady, fmt::format("robot '{}' was stopped", id)};
-      finish(robot, cell_motion_MOTION_FAILED, &error);
+    if (const auto halted = halted_error(); halted) {
+      finish(robot, cell_motion_MOTION_FAILED, &*halted);
     } else if (!v.moving || v.tracking) {
       finish(robot, cell_motion_MOTION_DONE, nullptr);
     } else if (seconds_since(a.last_status) >= 1.0 / config_.status_rate_hz) {

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -48,7 +49,7 @@ struct PlannerOptions {
   /// accuracy (the Excalibur's potentiometers: +-0.3 deg), and a start refused for that could
   /// never move again. The gateways take a path that starts within their start tolerance of
   /// the arm (0.5 deg, 0.5 mm as shipped): these must not exceed it.
-  double start_bounds_tolerance_rad = 0.5 * 3.141592653589793 / 180.0;
+  double start_bounds_tolerance_rad = 0.5 * std::numbers::pi / 180.0;
   double start_bounds_tolerance_mm = 0.5;
 };
 
