@@ -240,19 +240,13 @@ class Gateway7545Test : public ::testing::Test {
     for (auto& s : *batch) {
       const std::string_view id = bus::str(s->robot_id);
       if (id == "ibm7545.sim") {
-        const std::int64_t previous_ns = sim_state_ ? sim_state_->stamp_ns : 0;
         sim_state_ = copy(s.get());
-        if (sim_state_->overruns > overruns_) {  // a period past the board's deadline
-          overruns_ = sim_state_->overruns;
-          last_overrun_ = std::chrono::steady_clock::now();
-          // It happened since the previous state: the arm coasted on a stale torque from then
-          // until the loop caught up, and its error decays over the next 100 ms.
-          stall_windows_.emplace_back(previous_ns, sim_state_->stamp_ns + 100'000'000);
-        }
       } else if (id == "ibm7545") {
         gateway_state_ = copy(s.get());
         const StateCopy& g = *gateway_state_;
-        // Kept with their stamps; tracking_statistics() leaves out those a stall touched.
+        // Every state while moving counts: the simulated board's clock stands still while it
+        // waits for a late master or for its own process (the arm moves one period per
+        // exchange, whatever the host does), so no stall excuses a larger error.
         if (tracking_ && g.moving && g.q.size() == 4 && g.setpoint.size() == 4) {
           TrackedState t{g.stamp_ns, {}};
           for (std::size_t j = 0; j < 4; ++j) {
@@ -335,18 +329,7 @@ class Gateway7545Test : public ::testing::Test {
       // the gateway (the slave's 0x1000 follows).
       const bool link = gateway_state_->fault_text.find("link to the controller failed") !=
                         std::string::npos;
-      // A torque out of range within a moment of a period that the simulator's slack covered
-      // (cycle_overruns grew): the arm coasted on the stalled period's torque, the same stall's
-      // doing (the board would have flagged the stall itself).
-      // The simulator publishes its count at 100 Hz, independently of the gateway's fault:
-      // wait a moment for it.
-      const auto recent_overrun = [&] {
-        pump();
-        return std::chrono::steady_clock::now() - last_overrun_ < std::chrono::milliseconds(500);
-      };
-      const bool after_stall = (gateway_state_->fault_bits & ~kTorqueBits) == 0 &&
-                               eventually(recent_overrun, std::chrono::milliseconds(300));
-      if (!deadline && !link && !after_stall) {
+      if (!deadline && !link) {
         std::printf("not a deadline miss: %s (bits 0x%x)\n", gateway_state_->fault_text.c_str(),
                     gateway_state_->fault_bits);
         return false;
@@ -445,7 +428,6 @@ class Gateway7545Test : public ::testing::Test {
                                                                 std::chrono::seconds timeout) {
     for (int attempt = 0;; ++attempt) {
       tracked_.clear();
-      stall_windows_.clear();
       auto r = make();
       saw_fault_ = false;  // of the run that completes
       auto status = wait_motion(send(r), timeout);
@@ -539,36 +521,21 @@ class Gateway7545Test : public ::testing::Test {
   bool tracking_ = false;
   bool saw_fault_ = false;
   int spontaneous_misses_ = 0;
-  std::uint64_t overruns_ = 0;  ///< the simulator's cycle_overruns last seen
-  std::chrono::steady_clock::time_point last_overrun_{};
   /// A gateway state sampled while tracking: its stamp and |measured - setpoint| per joint.
   struct TrackedState {
     std::int64_t stamp_ns;
     std::array<double, 4> error_counts;
   };
   std::vector<TrackedState> tracked_;  ///< of the motion run last (run_motion clears it)
-  /// [from, to] wall-clock stamps of the simulator's states between which a cycle overran
-  /// (the slack absorbed it), to 100 ms after: the arm coasted on a stale torque meanwhile.
-  std::vector<std::pair<std::int64_t, std::int64_t>> stall_windows_;
 
-  /// The worst following error over the tracked states no stall touched, with how many were
-  /// kept and left out. A state is judged by its own stamp against the windows, after the
-  /// move: not by when the test happened to read it.
+  /// The worst following error over the tracked states, and how many there were.
   struct Tracking {
     std::array<double, 4> worst{};
     int kept = 0;
-    int left_out = 0;
   };
   Tracking tracking_statistics() const {
     Tracking out;
     for (const auto& t : tracked_) {
-      const bool stalled = std::any_of(
-          stall_windows_.begin(), stall_windows_.end(),
-          [&](const auto& w) { return w.first <= t.stamp_ns && t.stamp_ns <= w.second; });
-      if (stalled) {
-        ++out.left_out;
-        continue;
-      }
       for (std::size_t j = 0; j < 4; ++j) {
         out.worst[j] = std::max(out.worst[j], t.error_counts[j]);
       }
@@ -596,46 +563,27 @@ TEST_F(Gateway7545Test, HomesThenTracksAViaPointPathWithinTheFollowingErrorBound
   }
   EXPECT_LE(truth_gap(), kTruthCounts);
 
-  // Long segments, so that the joints approach their speed limits; at 0.8 of them the path's
-  // accelerations stay inside config/robots/ibm7545.yaml's (placeholder) acceleration limits,
-  // which the via-point planner does not size for (it sizes for speed, as the thesis).
+  // Long segments, so that the joints approach their speed limits (0.8 of them); the planner
+  // stretches a segment whose acceleration would pass config/robots/ibm7545.yaml's limits.
   const std::vector<double> via = {deg(40), deg(50), 100.0, deg(30)};
   const std::vector<double> target = {deg(90), deg(100), 180.0, deg(60)};
-  // The statistics need 50 states no machine stall touched (a 100 Hz stream over a move of
-  // seconds). A host that stalls the loop all through a move leaves too few to judge the loop
-  // by: then the arm goes back home and the move runs again (at most three runs in all).
-  const std::vector<double> home_joints(4, 0.0);  // where home() left the arm (checked above)
-  Tracking stats;
-  for (int run = 0; run < 3; ++run) {
-    if (run > 0) {
-      std::printf("run %d: only %d of %d tracked states clear of a machine stall; again\n", run,
-                  stats.kept, stats.kept + stats.left_out);
-      auto back = move_joints(home_joints);
-      ASSERT_TRUE(back.has_value() && (*back)->state == cell_motion_MOTION_DONE);
-      settle();
-    }
-    tracking_ = true;
-    auto status = run_motion(
-        [&] {
-          auto r = via_path(via, target);
-          r.speed_scale = 0.8;
-          return r;
-        },
-        60s);
-    tracking_ = false;
-    ASSERT_TRUE(status.has_value()) << "no terminal motion status";
-    ASSERT_EQ((*status)->state, cell_motion_MOTION_DONE) << bus::str((*status)->reason);
-    EXPECT_FALSE(saw_fault_);
-    stats = tracking_statistics();
-    if (stats.kept > 50) {
-      break;
-    }
-  }
+  tracking_ = true;
+  auto status = run_motion(
+      [&] {
+        auto r = via_path(via, target);
+        r.speed_scale = 0.8;
+        return r;
+      },
+      60s);
+  tracking_ = false;
+  ASSERT_TRUE(status.has_value()) << "no terminal motion status";
+  ASSERT_EQ((*status)->state, cell_motion_MOTION_DONE) << bus::str((*status)->reason);
+  EXPECT_FALSE(saw_fault_);
+  // A 100 Hz stream over a move of seconds.
+  const Tracking stats = tracking_statistics();
   EXPECT_GT(stats.kept, 50);
-  std::printf(
-      "worst following error over %d states (%d near a machine stall left out) "
-      "[counts]: J1 %.1f, J2 %.1f, Z %.1f, R %.1f\n",
-      stats.kept, stats.left_out, stats.worst[0], stats.worst[1], stats.worst[2], stats.worst[3]);
+  std::printf("worst following error over %d states [counts]: J1 %.1f, J2 %.1f, Z %.1f, R %.1f\n",
+              stats.kept, stats.worst[0], stats.worst[1], stats.worst[2], stats.worst[3]);
   for (std::size_t j = 0; j < 4; ++j) {
     EXPECT_LE(stats.worst[j], kMaxFollowingCounts[j]) << "joint " << j;
     EXPECT_GT(stats.worst[j], 0.0) << "joint " << j << " (a real PD loop lags)";
