@@ -574,6 +574,8 @@ void Dpr7545Driver::on_deactivate() noexcept {
              {"simulator_stall_cycles", std::to_string(c.simulator_stall_cycles)},
              {"max_simulator_silence_ms",
               fmt::format("{:.1f}", static_cast<double>(c.max_simulator_silence_ns) * 1e-6)},
+             {"procedure_stall_ms",
+              fmt::format("{:.1f}", static_cast<double>(c.procedure_stall_ns) * 1e-6)},
              {"slave_deadline_errors", std::to_string(c.slave_deadline_errors)},
              {"max_wait_us", fmt::format("{:.1f}", static_cast<double>(c.max_wait_ns) * 1e-3)}});
 }
@@ -931,6 +933,17 @@ CycleStatus Dpr7545Driver::read_cycle(Clock::time_point now, JointState& state) 
     const std::uint32_t bits = std::exchange(pending_bits_, 0U);
     read_idle(state);
     return fault(bits | dpr_->error(), state);
+  }
+  // A procedure's time (engage, leave, homing, gripper) does not run while a simulated board's
+  // process is stalled: its slave did not run, so it could not answer (a soak job faulted with
+  // 0x20000 "did not finish in time" while the simulator stalled beside a second 1 kHz pair).
+  // The real board never stalls; without a simulator's stamp nothing changes.
+  const std::int64_t since_last_read = last_cycle_start_ns_ > 0 ? start - last_cycle_start_ns_ : 0;
+  last_cycle_start_ns_ = start;
+  if (since_last_read > 0 && phase_ != Phase::kControl && phase_ != Phase::kIdle &&
+      phase_ != Phase::kFault && simulator_stalled(start)) {
+    phase_since_ns_ += since_last_read;
+    procedure_stall_ns_.fetch_add(since_last_read, std::memory_order_relaxed);
   }
   const auto elapsed_periods = [&] { return (start - phase_since_ns_) / period_ns_; };
   switch (phase_) {
@@ -1369,6 +1382,7 @@ Dpr7545Counters Dpr7545Driver::counters() const noexcept {
   c.rephases = rephases_.load(std::memory_order_relaxed);
   c.simulator_stall_cycles = simulator_stalls_.load(std::memory_order_relaxed);
   c.max_simulator_silence_ns = max_simulator_silence_ns_.load(std::memory_order_relaxed);
+  c.procedure_stall_ns = procedure_stall_ns_.load(std::memory_order_relaxed);
   return c;
 }
 

@@ -84,6 +84,9 @@ struct Dpr7545Counters {
   /// kSimulatorSilentLimitNs of silence (simulator_stalled()). Always 0 on the real card.
   std::uint64_t simulator_stall_cycles = 0;
   std::int64_t max_simulator_silence_ns = 0;  ///< the longest such silence seen
+  /// Time a procedure's timeout (engage, leave, homing, gripper) was held while the simulator
+  /// stalled. Always 0 on the real card.
+  std::int64_t procedure_stall_ns = 0;
 };
 
 /// The IBM 7545 master over the dual-port RAM (digest 000 §2): the gateway is the master, the
@@ -304,6 +307,7 @@ class Dpr7545Driver final : public RobotDriver {
   cell_robot_GripperState gripper_ = cell_robot_GRIPPER_UNKNOWN;
   std::uint8_t lights_ = 0;
   std::int64_t last_read_ns_ = 0;
+  std::int64_t last_cycle_start_ns_ = 0;  ///< read_cycle's previous start (procedure clocks)
   std::int64_t cycle_phase_ns_ = 0;  ///< the host's own cycle grid, as tracked
   int periodic_reads_ = 0;
   int phase_checks_ = 0;  ///< exchanges judged since control mode started
@@ -331,6 +335,7 @@ class Dpr7545Driver final : public RobotDriver {
   std::atomic<std::uint64_t> timeouts_{0};
   std::atomic<std::uint64_t> simulator_stalls_{0};
   std::atomic<std::int64_t> max_simulator_silence_ns_{0};
+  std::atomic<std::int64_t> procedure_stall_ns_{0};
   std::atomic<std::uint64_t> deadline_errors_{0};
   std::atomic<std::uint64_t> engages_{0};
   std::atomic<std::int64_t> max_wait_ns_{0};

@@ -726,6 +726,45 @@ TEST_F(Dpr7545DriverTest, AStalledSimulatorIsWaitedForAndCountedNotTakenForALost
   slave_.stall = false;
 }
 
+// A procedure's timeout does not run while the simulator's process is stalled: its slave could
+// not answer (a soak job faulted with 0x20000 while the simulator stalled). A slave that runs
+// and does not answer still times out.
+TEST_F(Dpr7545DriverTest, AProcedureWaitsOutASimulatorsStallButNotASilentRunningSlave) {
+  const d::SimControl control(memory_->window());
+  control.initialise(static_cast<std::uint32_t>(::getpid()));
+  control.set_grace_us(kPeriodUs);
+  home_and_engage();
+  slave_.stall = true;
+  std::this_thread::sleep_for(3 * kPeriod);  // let the running period end
+  ASSERT_THAT(driver_.command(DriverCommand::kGripperClose, {}), IsOk());
+  // Silent for 10 periods at every look, for longer than leaving control mode may take.
+  constexpr int kLeaveTimeoutPeriods = 200;  // dpr7545_driver.cpp
+  for (int i = 0; i < kLeaveTimeoutPeriods + 20; ++i) {
+    control.set_alive_ns(mono_ns() - 10LL * kPeriodUs * 1000);
+    ASSERT_NE(cycle(), CycleStatus::kFault) << "cycle " << i << ": " << state_.fault_bits;
+  }
+  EXPECT_GE(driver_.counters().procedure_stall_ns, kLeaveTimeoutPeriods * kPeriodUs * 1000LL);
+  slave_.stall = false;
+  ASSERT_TRUE(cycle_until([&] { return state_.gripper == cell_robot_GRIPPER_CLOSED; }));
+  EXPECT_EQ(dpr_.error(), 0);
+  ASSERT_TRUE(cycle_until([&] { return slave_.control_entries() == 2; }));
+
+  // Stamped alive at every look, yet not answering: the leave times out.
+  slave_.stall = true;
+  std::this_thread::sleep_for(3 * kPeriod);
+  ASSERT_THAT(driver_.command(DriverCommand::kGripperOpen, {}), IsOk());
+  const std::int64_t held = driver_.counters().procedure_stall_ns;
+  CycleStatus s = CycleStatus::kOk;
+  for (int i = 0; i < kLeaveTimeoutPeriods + 20 && s != CycleStatus::kFault; ++i) {
+    control.set_alive_ns(mono_ns());
+    s = cycle();
+  }
+  EXPECT_EQ(s, CycleStatus::kFault);
+  EXPECT_NE(state_.fault_bits & kDprFaultProcedureTimeout, 0U);
+  EXPECT_EQ(driver_.counters().procedure_stall_ns, held);
+  slave_.stall = false;
+}
+
 // A master that dies mid-control (it stops exchanging: the slave flags torques late and drops
 // its DACs) is followed by one that re-attaches: the homing record (homing_record.hpp) matches
 // the board, so the successor is homed at once, clears the stale deadline bit, and holds the
