@@ -122,6 +122,12 @@ void SimulatedController::loop() {
       return;
     }
     in.clear();
+    // Bytes read now arrived after the previous pass's last read(), which came after that
+    // pass's read_start: the window (previous read_start, now] holds them. The end of the
+    // previous pass's reads would not do: a preemption between a drained read() and the clock
+    // read put a byte that arrived in between after its true arrival, and the 6809's generous
+    // reading then counted a false overrun (excalibur_bench.smoke: ER 3 under load).
+    const double read_start = now_s();
     for (;;) {
       const ssize_t got = ::read(fd, buf.data(), buf.size());
       if (got <= 0) {
@@ -135,7 +141,7 @@ void SimulatedController::loop() {
       if (!in.empty()) {
         model_.receive(in, last_read, now);
       }
-      last_read = now;
+      last_read = read_start;
       model_.advance(now);
       while (model_.pop_output(now, line)) {
         if (pending.empty()) {
