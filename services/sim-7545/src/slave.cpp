@@ -355,9 +355,14 @@ void Slave::control_mode() {
     // The grace of deadline_slack_s (0 on the board) is added to both deadlines; an injected
     // miss stalls past the board's own deadline, as before (the master's link check, a few
     // cycles without an exchange, would fault first if it waited for the slack too).
-    const std::int64_t board_deadline = now_ns() + period;
+    const std::int64_t announced = now_ns();
+    const std::int64_t board_deadline = announced + period;
     const auto slack = static_cast<std::int64_t>(options_.deadline_slack_s * 1e9);
     std::int64_t deadline = board_deadline + slack;
+    if (const std::int64_t stall = stall_next_period_ns_.exchange(0, std::memory_order_relaxed);
+        stall > 0) {
+      sleep_until_ns(announced + stall);  // injected (tests): descheduled before the positions
+    }
     get_robot_state();
     overrun_check();  // check for overruns and end if found
     ++periods_;
@@ -376,8 +381,10 @@ void Slave::control_mode() {
     // wait_for_torque. The slave code tests the deadline before the flag; we test the flag
     // first: this process may be descheduled past the deadline while the master's torques were
     // already there, and its own lateness must not be blamed on the master. On time, the two
-    // orders are the same.
-    std::int64_t last_look = now_ns();
+    // orders are the same. The first look's gap runs from the announcement: a stall before the
+    // positions were published (the master could not answer) is this process's, not the
+    // master's (a soak's job paused on 0x1000 while the master woke on time every period).
+    std::int64_t last_look = announced;
     for (;;) {
       if (dpr_.command() == 0) {
         return;  // the master ended control mode

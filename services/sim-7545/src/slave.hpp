@@ -94,6 +94,12 @@ class Slave {
   /// The latest state (thread-safe; resets late_max_us).
   SlaveSnapshot take_snapshot();
 
+  /// Tests: the next period of control mode, this process stalls for `ns` after announcing the
+  /// period and before its positions, as a descheduled process would (thread-safe).
+  void stall_next_period(std::int64_t ns) noexcept {
+    stall_next_period_ns_.store(ns, std::memory_order_relaxed);
+  }
+
   /// The limit/index sensor port at 0xB000 as the FH macro reads it: home bits (4 Z, 7 J1,
   /// 6 J2, 5 R) are active low, index bits (0 Z, 2 J1, 1 J2, 3 R) read 1 when an index pulse
   /// passed since the previous read. Slave thread only.
@@ -143,6 +149,7 @@ class Slave {
   bool homed_ = false;
   bool gripper_closed_ = false;
   bool arm_deadline_miss_ = false;
+  std::atomic<std::int64_t> stall_next_period_ns_{0};
   bool arm_loop_late_ = false;
   bool auto_miss_done_ = false;
   std::int64_t control_since_ns_ = -1;

@@ -244,6 +244,23 @@ TEST_F(SlackSlaveTest, AMasterLateWithinTheSlackIsServedAndOneThatNeverAnswersIs
   EXPECT_GE(waited, 215ms);
 }
 
+// This process stalled (descheduled) after announcing a period and before its positions, for
+// longer than the period and the slack: the master could not answer meanwhile, so the stall is
+// the slave's own and moves the deadline; the master answering as soon as it sees the
+// positions is served. (A soak's job paused on 0x1000 while the gateway woke on time.)
+TEST_F(SlackSlaveTest, AStallOfThisProcessBeforeItsPositionsIsNotChargedToTheMaster) {
+  enter_control();
+  ASSERT_TRUE(serve());
+  const std::uint64_t stalls = slave_->take_snapshot().stalls_absorbed;
+  slave_->stall_next_period(300'000'000);  // > period (20 ms) + slack (200 ms)
+  ASSERT_TRUE(serve()) << "error 0x" << std::hex << dpr_.error();
+  ASSERT_TRUE(serve()) << "error 0x" << std::hex << dpr_.error();
+  EXPECT_EQ(dpr_.error(), 0);
+  const SlaveSnapshot s = slave_->take_snapshot();
+  EXPECT_EQ(s.deadline_errors, 0U);
+  EXPECT_GT(s.stalls_absorbed, stalls);
+}
+
 // The board's clock, on which the arm moves, advances exactly one period per period, also
 // through a master 5 periods late that the slack covers: the arm moves as under an on-time
 // master (J1's encoder, period by period, is a JointModel's advanced one period at a time under
