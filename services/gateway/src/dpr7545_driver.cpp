@@ -839,7 +839,7 @@ CycleStatus Dpr7545Driver::read(Clock::time_point now, JointState& state) {
   }
   retries_in_a_row_ = status == CycleStatus::kRetry ? retries_in_a_row_ + 1 : 0;
   if (retries_in_a_row_ == info_.link_retries + 1) {
-    log_link_trace();
+    log_link_trace("the link failed in every one of the last reads: the last reads");
   }
   // A torque word the slave rejected: what the PD law did in the exchanges before it, once
   // per fault (a fault that nothing explains cannot be fixed: the soak's faults said only the
@@ -847,12 +847,19 @@ CycleStatus Dpr7545Driver::read(Clock::time_point now, JointState& state) {
   if (status == CycleStatus::kFault) {
     constexpr std::uint32_t kTorqueBits =
         d::kErrTorqueJ1 | d::kErrTorqueJ2 | d::kErrTorqueZ | d::kErrTorqueR;
-    if ((latched_bits_ & kTorqueBits) != 0 && !torque_trace_logged_) {
+    if ((latched_bits_ & kTorqueBits) != 0 && !fault_trace_logged_) {
       log_torque_trace(latched_bits_);
-      torque_trace_logged_ = true;
+      fault_trace_logged_ = true;
+    }
+    // A late master the slave flagged past its grace: where this side's time went (a soak's
+    // deadline faults on a quiet host said only the bit).
+    if ((latched_bits_ & d::kErrDeadlineMask) != 0 && !fault_trace_logged_) {
+      log_link_trace(fmt::format("the slave flagged a late master ({:#06x}): the last reads",
+                                 latched_bits_ & d::kErrDeadlineMask));
+      fault_trace_logged_ = true;
     }
   } else {
-    torque_trace_logged_ = false;
+    fault_trace_logged_ = false;
   }
   return status;
 }
@@ -888,7 +895,7 @@ void Dpr7545Driver::log_torque_trace(std::uint32_t bits) const {
                         "(+-2047 valid)"}});
 }
 
-void Dpr7545Driver::log_link_trace() const {
+void Dpr7545Driver::log_link_trace(std::string_view what) const {
   std::string text;
   const std::size_t n = std::min(trace_next_, kTraceCycles);
   const std::int64_t last = trace_[(trace_next_ - 1) % kTraceCycles].start_ns;
@@ -905,7 +912,7 @@ void Dpr7545Driver::log_link_trace() const {
                             : fmt::format("{:.1f}ms",
                                           static_cast<double>(e.simulator_silent_ns) * 1e-6));
   }
-  log::warn("dpr7545", "the link failed in every one of the last reads: the last reads",
+  log::warn("dpr7545", std::string(what),
             {{"retries_in_a_row", std::to_string(retries_in_a_row_)},
              {"reads", text},
              {"legend", "newest first, start relative to the last: phase/status(0 ok, 1 "

@@ -8,6 +8,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <thread>
 
 #include "cell/dpr7545/dpr.hpp"
@@ -221,10 +222,10 @@ class Dpr7545Driver final : public RobotDriver {
     float derivative_us = 0;    ///< the D term's interval
   };
   static constexpr std::size_t kTraceCycles = 40;
-  void log_link_trace() const;
+  void log_link_trace(std::string_view what) const;
   /// The last exchanges' PD steps, logged once when the slave rejects a torque word.
   void log_torque_trace(std::uint32_t bits) const;
-  bool torque_trace_logged_ = false;
+  bool fault_trace_logged_ = false;
   std::array<TraceEntry, kTraceCycles> trace_{};
   std::size_t trace_next_ = 0;
   int retries_in_a_row_ = 0;
