@@ -7,6 +7,8 @@
 #   overrun faults  the board's 0x0001-0x00FF (a joint past its overrun limit)
 #   deadline faults the board's 0x1000 / 0x2000 (a master later than the board's grace)
 #   link faults     the gateway's "link to the controller failed" (no exchange 4 cycles running)
+#   other faults    the gateway's own faults with bits above the board's (0x10000 and up: a
+#                   slave that went silent, a procedure that did not finish in time)
 #   late periods    periods whose master finished past the board's deadline, served within the
 #                   simulator's grace (cellctl robot state: board.late_periods)
 #   board behind    how far the simulated board's clock fell behind the host's (the time it
@@ -64,9 +66,17 @@ board_faults() {  # board_faults MASK_REGEX: the board's error lines whose bits 
     done | wc -l
 }
 
+gateway_faults() {  # the gateway's own faults: bits above the board's 16
+  [ -f "$logs/gateway.ibm7545.log" ] || { echo 0; return; }
+  grep -E "msg=\"robot 'ibm7545' faulted \(bits 0x[0-9a-f]+\)" "$logs/gateway.ibm7545.log" |
+    sed -n 's/.*faulted (bits 0x\([0-9a-f]*\)).*/\1/p' | while read -r b; do
+      [ $((16#$b >> 16)) -ne 0 ] && echo x
+    done | wc -l
+}
+
 failed=0
-printf '%-4s %-10s %6s %7s %7s %7s %7s %7s %8s %8s\n' job state time_s placed in_slot torque \
-  overrun deadln link late_per
+printf '%-4s %-10s %6s %7s %7s %7s %7s %7s %8s %6s %8s\n' job state time_s placed in_slot torque \
+  overrun deadln link other late_per
 for i in $(seq 1 "$jobs"); do
   "$cellctl" world reset >/dev/null || { echo "table_soak: world reset failed" >&2; failed=1; break; }
   t0=$SECONDS
@@ -100,9 +110,10 @@ print(len(used))' "$job_file" 2>/dev/null || echo "?")"
   overrun=$(board_faults 0x00FF)
   deadline=$(board_faults 0x3000)
   link=$(count "$logs/gateway.ibm7545.log" 'link to the controller failed')
+  other=$(gateway_faults)
   late="$("$cellctl" --json robot state --robot ibm7545 2>/dev/null | jq -r '.board.late_periods // "?"')"
-  printf '%-4s %-10s %6d %7s %7s %7s %7s %7s %8s %8s\n' "$i" "$state" "$t" "$placed" "$in_slot" \
-    "$torque" "$overrun" "$deadline" "$link" "$late"
+  printf '%-4s %-10s %6d %7s %7s %7s %7s %7s %8s %6s %8s\n' "$i" "$state" "$t" "$placed" \
+    "$in_slot" "$torque" "$overrun" "$deadline" "$link" "$other" "$late"
   if [ "$rc" -ne 0 ] || [ "$state" != succeeded ]; then
     failed=1
     # A job that did not end (paused on a fault): reset the robot so the next can run.
@@ -113,9 +124,11 @@ done
 behind="$(grep -o 'board_clock_behind_s=[0-9.]*' "$logs/sim-7545.log" 2>/dev/null | tail -1 | cut -d= -f2)"
 echo "table_soak: totals (cumulative over the run): torque $(board_faults 0x0F00), overrun" \
   "$(board_faults 0x00FF), deadline $(board_faults 0x3000), link" \
-  "$(count "$logs/gateway.ibm7545.log" 'link to the controller failed'); the board's clock" \
+  "$(count "$logs/gateway.ibm7545.log" 'link to the controller failed'), other" \
+  "$(gateway_faults); the board's clock" \
   "${behind:-0} s behind the host's" >&2
-[ "$(board_faults 0x3FFF)" -eq 0 ] && [ "$(count "$logs/gateway.ibm7545.log" 'link to the controller failed')" -eq 0 ] || failed=1
+[ "$(board_faults 0x3FFF)" -eq 0 ] && [ "$(gateway_faults)" -eq 0 ] &&
+  [ "$(count "$logs/gateway.ibm7545.log" 'link to the controller failed')" -eq 0 ] || failed=1
 # The servo's own account over the whole run (the gateway logs it every 30 s and when it
 # stops): following error |reference - encoder| p50 / p99 / max and the torque word's peak as
 # a fraction of its range, per joint J1 J2 Z R (services/gateway/src/dpr7545_driver.hpp).
