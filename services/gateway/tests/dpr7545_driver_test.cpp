@@ -334,6 +334,19 @@ class Dpr7545DriverTest : public ::testing::Test {
     ASSERT_TRUE(cycle_until([&] { return !slave_.periods().empty(); })) << "no control mode";
   }
 
+  /// A simulator's control block (a grace of one period), control mode engaged, then the
+  /// slave stalled at a period's boundary: its liveness stamp is the test's to set.
+  d::SimControl engage_then_stall_the_simulator() {
+    d::SimControl control(memory_->window());
+    control.initialise(static_cast<std::uint32_t>(::getpid()));
+    control.set_grace_us(kPeriodUs);
+    home_and_engage();
+    slave_.stall = true;
+    std::this_thread::sleep_for(3 * kPeriod);  // let the running period end
+    return control;
+  }
+
+
   ScopedThreadFifo fifo_;  // first: the master runs at SCHED_FIFO from its construction on
   kinematics::RobotModel model_;
   std::unique_ptr<d::Transport> memory_;
@@ -698,12 +711,7 @@ TEST_F(Dpr7545DriverTest, SilentSlaveGivesBoundedRetriesNotABlockedCycle) {
 // waits for it without counting a link failure, and counts the cycles. One that runs and does
 // not answer, one silent past the limit, and the real card (no control block) are retried.
 TEST_F(Dpr7545DriverTest, AStalledSimulatorIsWaitedForAndCountedNotTakenForALostLink) {
-  const d::SimControl control(memory_->window());
-  control.initialise(static_cast<std::uint32_t>(::getpid()));
-  control.set_grace_us(kPeriodUs);
-  home_and_engage();
-  slave_.stall = true;
-  std::this_thread::sleep_for(3 * kPeriod);  // let the running period end
+  const d::SimControl control = engage_then_stall_the_simulator();
   const auto stalled_for = [&](std::int64_t silent_ns) {
     control.set_alive_ns(mono_ns() - silent_ns);
     return cycle();
@@ -730,12 +738,7 @@ TEST_F(Dpr7545DriverTest, AStalledSimulatorIsWaitedForAndCountedNotTakenForALost
 // not answer (a soak job faulted with 0x20000 while the simulator stalled). A slave that runs
 // and does not answer still times out.
 TEST_F(Dpr7545DriverTest, AProcedureWaitsOutASimulatorsStallButNotASilentRunningSlave) {
-  const d::SimControl control(memory_->window());
-  control.initialise(static_cast<std::uint32_t>(::getpid()));
-  control.set_grace_us(kPeriodUs);
-  home_and_engage();
-  slave_.stall = true;
-  std::this_thread::sleep_for(3 * kPeriod);  // let the running period end
+  const d::SimControl control = engage_then_stall_the_simulator();
   ASSERT_THAT(driver_.command(DriverCommand::kGripperClose, {}), IsOk());
   // Silent for 10 periods at every look, for longer than leaving control mode may take.
   constexpr int kLeaveTimeoutPeriods = 200;  // dpr7545_driver.cpp
