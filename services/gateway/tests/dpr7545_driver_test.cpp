@@ -346,7 +346,6 @@ class Dpr7545DriverTest : public ::testing::Test {
     return control;
   }
 
-
   ScopedThreadFifo fifo_;  // first: the master runs at SCHED_FIFO from its construction on
   kinematics::RobotModel model_;
   std::unique_ptr<d::Transport> memory_;
