@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -159,8 +160,12 @@ TEST(TrajectoryExecutor, RestsAtDestinationPlusTotalCorrection) {
 /// read); the robot moves in a straight line to where the part was (part.loc) while a tracker
 /// sends, every `cycle_s`, the total world-frame correction -mm_per_count * (pos - offset) and
 /// its rate from the encoder. Returns the largest tool-to-part distance from arrival
-/// ("stopped at planned location") through a 0.2 s gripper closure.
-double track_belt(double belt_mm_s, double cycle_s, bool rate_feed_forward) {
+/// ("stopped at planned location") through a 0.2 s gripper closure. With `limited`, the
+/// executor keeps the gantry's joint limits, the tracking ends with ALTOFF, and `peak_accel`
+/// gets the largest sampled acceleration over the whole path, ALTOFF's braking to rest included,
+/// as a fraction of the limit.
+double track_belt(double belt_mm_s, double cycle_s, bool rate_feed_forward, bool limited = false,
+                  double* peak_accel = nullptr) {
   constexpr double kMmPerCount = 50.0 * std::numbers::pi / (1024 * 4);  // digest 002 T9: 0.03835
   testing::Gantry gantry(4000, 40000, 5000);
   const Eigen::Vector3d part0(300, 800, 0);  // where vision located the part at t = 0
@@ -177,9 +182,11 @@ double track_belt(double belt_mm_s, double cycle_s, bool rate_feed_forward) {
   auto line = plan_linear_move(jv({0, 0, 100}), part_loc, gantry.forward(), gantry.inverse(),
                                gantry.limits, options);
   EXPECT_THAT(line, IsOk());
-  TrajectoryExecutor exec(gantry.forward(), gantry.inverse());
+  TrajectoryExecutor exec(gantry.forward(), gantry.inverse(),
+                          limited ? gantry.limits : JointLimits{});
   exec.load(*line, t_start, true, {.cumulative = false, .world_frame = true});
 
+  std::vector<JointVector> path;  // every setpoint, 1 ms apart
   double next_cycle = t_start;
   double last_count = count_at(t_start - 4 * cycle_s);
   double last_count_t = t_start - 4 * cycle_s;
@@ -202,6 +209,7 @@ double track_belt(double belt_mm_s, double cycle_s, bool rate_feed_forward) {
       next_cycle += cycle_s;
     }
     const ExecState state = exec.step(t, out);
+    path.push_back(out.q);
     EXPECT_NE(state, ExecState::kFailed) << exec.failure().message;
     if (state == ExecState::kArrived && arrived_at < 0) {
       arrived_at = t;
@@ -214,6 +222,27 @@ double track_belt(double belt_mm_s, double cycle_s, bool rate_feed_forward) {
     }
   }
   EXPECT_GT(arrived_at, 0) << "never arrived";
+  if (limited) {
+    // ALTOFF at belt speed: the arm brakes at its limits and rests where braking ends.
+    exec.alter_off();
+    double t = arrived_at + 0.201;
+    int braking = 0;
+    for (; exec.step(t, out) == ExecState::kMoving && braking < 2000; t += 0.001, ++braking) {
+      path.push_back(out.q);
+    }
+    path.push_back(out.q);
+    const double v = belt_mm_s;
+    const double a = gantry.limits.max_acceleration[1];
+    EXPECT_NEAR(braking * 0.001, v / a, 0.003) << "braked at its limit from belt speed";
+    double peak = 0;
+    for (std::size_t k = 2; k < path.size(); ++k) {
+      const JointVector accel = (path[k] - 2 * path[k - 1] + path[k - 2]) / 1e-6;
+      peak = std::max(peak, accel.cwiseAbs().cwiseQuotient(gantry.limits.max_acceleration).maxCoeff());
+    }
+    if (peak_accel != nullptr) {
+      *peak_accel = peak;
+    }
+  }
   std::printf("belt %.0f mm/s, cycle %.0f ms, rate %s: worst tool-to-part %.4f mm\n", belt_mm_s,
               cycle_s * 1e3, rate_feed_forward ? "on" : "off", worst);
   return worst;
@@ -227,6 +256,59 @@ TEST(AlterTracking, ToolStaysOnAPartMovingAtHalfAMetrePerSecond) {
 TEST(AlterTracking, ToolStaysOnAPartMovingAtTwoMetresPerSecond) {
   EXPECT_LT(track_belt(2000, 0.004, true), 0.1);
   EXPECT_LT(track_belt(2000, 0.016, true), 0.1);
+}
+
+// With the joint limits the setpoints keep them on the whole path, ALTOFF at 2 m/s included
+// (the gantry's 40 m/s^2 brake it in 0.05 s instead of stopping it in one cycle), and where the
+// altered path is within them the tool is still on the part.
+TEST(AlterTracking, WithJointLimitsEverySampleKeepsThemAndAltoffBrakesToRest) {
+  for (const double belt : {500.0, 2000.0}) {
+    double peak = 1e9;
+    EXPECT_LT(track_belt(belt, 0.004, true, true, &peak), 0.1) << belt << " mm/s";
+    EXPECT_LE(peak, 1.01) << belt << " mm/s: peak acceleration / limit";
+  }
+}
+
+// A path loaded while the setpoints still move (here right after ALTOFF, the arm braking from
+// 0.5 m/s of tracking) is joined with bounded acceleration, not a step to its start at rest;
+// the executor says kMoving until the setpoints are on the path, and it ends where the path does.
+TEST(TrajectoryExecutor, WithLimitsAPathLoadedWhileMovingIsJoinedWithinThem) {
+  const testing::Gantry g(2000, 10000);
+  TrajectoryExecutor exec(g.forward(), g.inverse(), g.limits);
+  auto hold = JointTrajectory::from_knots({Knot{0.0, jv({0, 0, 0}), jv({0, 0, 0})}});
+  ASSERT_THAT(hold, IsOk());
+  exec.load(*hold, 0.0, true, {.cumulative = false, .world_frame = true});
+  std::vector<JointVector> path;
+  JointSample out;
+  double t = 0;
+  for (; t < 0.5; t += 0.001) {  // tracking a part at 0.5 m/s along +y (met at t = 0.1 s)
+    AlterCorrection c = dy(std::max(0.0, 500 * (t - 0.1)), t);
+    c.velocity_mm_s = Eigen::Vector3d(0, t >= 0.1 ? 500 : 0, 0);
+    exec.submit_alter(c);
+    exec.step(t, out);
+    path.push_back(out.q);
+  }
+  EXPECT_NEAR(out.qd[1], 500, 1e-6);
+  exec.alter_off();
+  // The depart: planned from where the arm was when ALTOFF was sent, 30 mm up (z).
+  Eigen::Isometry3d up = g.forward()(out.q);
+  up.translation().z() += 30;
+  auto depart = plan_linear_move(out.q, up, g.forward(), g.inverse(), g.limits);
+  ASSERT_THAT(depart, IsOk());
+  exec.load(*depart, t, false, {});
+  int moving = 0;
+  for (; exec.step(t, out) == ExecState::kMoving && moving < 3000; t += 0.001, ++moving) {
+    path.push_back(out.q);
+  }
+  path.push_back(out.q);
+  double peak = 0;
+  for (std::size_t k = 2; k < path.size(); ++k) {
+    const JointVector accel = (path[k] - 2 * path[k - 1] + path[k - 2]) / 1e-6;
+    peak = std::max(peak, accel.cwiseAbs().cwiseQuotient(g.limits.max_acceleration).maxCoeff());
+  }
+  EXPECT_LE(peak, 1.01);
+  EXPECT_LT((out.q - depart->end()).norm(), 1e-9);
+  EXPECT_GT(exec.limited_cycles(), 10U);  // the 0.1 s meeting step and the join
 }
 
 // Without the rate, corrections lag by up to one cycle, as in V+ (digest 002 §2.3: 32 mm per

@@ -373,7 +373,12 @@ TEST_F(Dpr7545DriverTest, StaysOutOfControlModeUntilHomedThenHomesAndServos) {
   ASSERT_TRUE(cycle_until([&] { return state_.homed; }));
   EXPECT_FALSE(state_.busy);
   ASSERT_TRUE(cycle_until([&] { return slave_.periods().size() >= 20; }));
-  EXPECT_EQ(slave_.control_entries(), 1);
+  // One entry into control mode, and one more per re-engagement the driver counted because the
+  // slave's period grid began out of phase with ours (a slave or master descheduled as it
+  // engaged: a sanitizer's build on a loaded CI host did so). Nothing else may leave it.
+  const auto rephases = driver_.counters().rephases;
+  EXPECT_LE(rephases, 2U);
+  EXPECT_EQ(slave_.control_entries(), 1 + static_cast<int>(rephases));
   EXPECT_EQ(dpr_.error(), 0);
   EXPECT_EQ(driver_.counters().handshake_timeouts, 0U);
   // The measured joints are the slave's counts through counts_per_unit.

@@ -6,6 +6,7 @@
 
 #include "cell/common/result.hpp"
 #include "cell/trajectory/alter.hpp"
+#include "cell/trajectory/joint_limiter.hpp"
 #include "cell/trajectory/joint_trajectory.hpp"
 #include "cell/trajectory/planners.hpp"
 
@@ -27,10 +28,19 @@ enum class ExecState : std::uint8_t {
 /// make the path jump), reaching the full correction at the destination; after arrival the
 /// executor keeps the tool on destination + correction(t) (it tracks the moving part) until
 /// alter_off(). Each altered setpoint comes from IK seeded with the previous one.
+///
+/// With joint limits (the robot file's speeds and accelerations: motion::joint_limits), the setpoints keep them on
+/// the whole path, sampled cycle by cycle (JointLimiter): an altered path is followed through
+/// the limiter, which lags where the corrections ask more than the arm can do (counted:
+/// limited_cycles()); ALTOFF brakes the arm from its tracking speed at its limits to rest
+/// (kMoving until it rests) instead of holding it at once; a path loaded while the setpoints
+/// still move (a move that starts on a moving part) is joined with bounded acceleration. A
+/// planned path without ALTER keeps the limits by construction (the planners check them) and
+/// passes through unchanged. Without limits, the setpoints are the altered path itself.
 /// Not thread-safe; step() is allocation-free when the IK is.
 class TrajectoryExecutor {
  public:
-  TrajectoryExecutor(ForwardFn forward, InverseFn inverse);
+  TrajectoryExecutor(ForwardFn forward, InverseFn inverse, JointLimits limits = {});
 
   /// Loads a trajectory starting at time `start_s` (executor clock, seconds).
   void load(JointTrajectory trajectory, double start_s, bool alter_enabled, AlterMode mode);
@@ -63,6 +73,8 @@ class TrajectoryExecutor {
   const JointTrajectory& trajectory() const noexcept { return trajectory_; }
   /// Why the state is kFailed.
   const Error& failure() const noexcept { return failure_; }
+  /// Cycles (cumulative) in which the joint limits held the setpoints off the altered path.
+  std::uint64_t limited_cycles() const noexcept { return limiter_.limited_steps(); }
 
  private:
   ForwardFn forward_;
@@ -78,6 +90,13 @@ class TrajectoryExecutor {
   JointVector last_q_;
   bool has_last_ = false;
   Error failure_;
+  JointLimiter limiter_;
+  bool limiting_ = false;      ///< the setpoints come from the limiter (not yet on the path)
+  bool limiter_live_ = false;  ///< the limiter holds the last setpoint and its speed
+  double limiter_s_ = 0.0;     ///< time of the limiter's last step
+  double last_dt_s_ = 0.0;     ///< the last cycle's length
+  JointVector last_ref_q_;     ///< the altered path's last point (its speed by difference)
+  bool has_ref_ = false;
 };
 
 }  // namespace cell::trajectory
