@@ -175,13 +175,29 @@ TEST_F(ConveyorCellTest, StreamAtHalfAMetrePerSecondIsPickedAndTheMissesAddUp) {
   EXPECT_EQ(o.grasps_missed, 0);
 }
 
-TEST_F(ConveyorCellTest, StreamAtTwoMetresPerSecondIsPickedAndTheMissesAddUp) {
-  // config/jobs/conveyor_ics_fast.yaml: the arm waits low and downstream; each part is met
-  // where the motion service finds the arm can first be (a joint move, the grasp style that
-  // needs the least roll).
+// config/jobs/conveyor_ics_fast.yaml at 2 m/s: the picker cannot follow a part that fast on
+// belt1 within its joints' limits (its J1 would pass its published speed over most of the
+// window, its J2 its acceleration near the reach; core/motion's PlannerIntercept tests), so
+// the motion service refuses every meeting, naming the joint, before the arm moves; the job
+// counts each part outside the window and says why, and no gripper closes on nothing. (Until
+// the gateways kept the arm's limits, the ideal picker followed at any speed and this test
+// counted 19 or 20 parts of 20 in the bin.)
+TEST_F(ConveyorCellTest, StreamAtTwoMetresPerSecondIsRefusedWithinTheArmsLimitsAndSaysWhy) {
   const BeltOutcome o = run_stream(2000.0, "conveyor_ics_fast.yaml", "belt-2");
-  EXPECT_GE(picked_fraction(o), 0.95);
-  EXPECT_LE(o.grasps_missed, 1);
+  EXPECT_EQ(o.picked, 0);
+  EXPECT_EQ(o.in_bin, 0);
+  EXPECT_EQ(o.grasps_missed, 0);
+  EXPECT_GE(o.counters.value("outside_window", 0), 17) << o.counters.dump();
+  const json status = job("belt-2");
+  int refused = 0;
+  for (const json& part : status.value("parts", json::array())) {
+    const std::string detail = part.value("detail", "");
+    if (detail.find("2000 mm/s") != std::string::npos &&
+        detail.find("of its acceleration limit") != std::string::npos) {
+      ++refused;
+    }
+  }
+  EXPECT_GE(refused, 17) << status.dump(2);
 }
 
 TEST_F(TaskCellTest, KilledTwentyTimesTheTableJobStillPlacesEveryPartOnce) {

@@ -1,10 +1,13 @@
 #include "cell/motion/planner.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include <fmt/format.h>
 
 #include "cell/motion/robot_adapters.hpp"
+#include "cell/trajectory/alter.hpp"
 
 namespace cell::motion {
 namespace {
@@ -272,6 +275,69 @@ Result<Plan> Planner::track(const trajectory::JointVector& q0, const Eigen::Isom
   return plan;
 }
 
+namespace {
+
+/// How far following a moving target from a wait point along a meeting ramp asks the joints:
+/// the largest sampled (1 ms) joint speed and acceleration as a fraction of their limits, and
+/// which joint and where.
+struct FollowDemand {
+  double share = 0.0;  ///< the largest ratio / the share of its limit a meeting may use
+  double ratio = 0.0;  ///< that joint's speed or acceleration / its limit
+  int joint = -1;
+  bool acceleration = false;
+  double at_mm = 0.0;  ///< the target's travel past the wait point there
+};
+
+/// The share of each limit a meeting may use: all of the speed; half of the acceleration, as
+/// the ALTER corrections come every few ms, each with a rate, so between them the path's speed
+/// steps by the ramp's acceleration times their period, and the gateway's limiter smooths
+/// those steps with a lag the other half keeps small (PlannerIntercept tests: under 0.1 mm).
+constexpr double kFollowSpeedShare = 1.0;
+constexpr double kFollowAccelShare = 0.5;
+
+Result<FollowDemand> follow_demand(const kinematics::RobotModel& model,
+                                   const trajectory::JointLimits& limits,
+                                   const trajectory::JointVector& q_wait,
+                                   const Eigen::Isometry3d& wait, const Eigen::Vector3d& velocity,
+                                   const trajectory::MeetingRamp& ramp, double follow_s) {
+  constexpr double kDt = 0.001;
+  const double speed = velocity.norm();
+  const Eigen::Vector3d direction = velocity / speed;
+  const double d0 = -ramp.length_mm;
+  const double d1 = ramp.length_mm + speed * follow_s;
+  const int n = static_cast<int>(std::ceil((d1 - d0) / (speed * kDt)));
+  FollowDemand worst;
+  trajectory::JointVector q_prev2 = q_wait;
+  trajectory::JointVector q_prev = q_wait;
+  for (int k = 1; k <= n; ++k) {
+    const double d = d0 + speed * kDt * k;
+    Eigen::Isometry3d pose = wait;
+    pose.pretranslate(direction * ramp.displacement(d));
+    auto q = model.inverse(pose, q_prev);
+    if (!q) {
+      return Error{q.error().code,
+                   fmt::format("following the target {:.0f} mm past the meeting point: {}", d,
+                               q.error().message)};
+    }
+    for (Eigen::Index j = 0; j < q->size(); ++j) {
+      const double v = std::abs((*q)[j] - q_prev[j]) / kDt / limits.max_velocity[j];
+      const double a = k >= 2 ? std::abs((*q)[j] - 2 * q_prev[j] + q_prev2[j]) / (kDt * kDt) /
+                                    limits.max_acceleration[j]
+                              : 0.0;
+      const bool by_accel = a / kFollowAccelShare >= v / kFollowSpeedShare;
+      const double share = by_accel ? a / kFollowAccelShare : v / kFollowSpeedShare;
+      if (share > worst.share) {
+        worst = {share, by_accel ? a : v, static_cast<int>(j), by_accel, d};
+      }
+    }
+    q_prev2 = q_prev;
+    q_prev = *q;
+  }
+  return worst;
+}
+
+}  // namespace
+
 Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
                                      const MovingTarget& target, bool cumulative,
                                      bool world_frame, double speed_scale) const {
@@ -282,10 +348,12 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
                  "intercept: the target's velocity must be finite and non-zero"};
   }
   if (!std::isfinite(target.start_s) || target.start_s < 0 || !std::isfinite(target.margin_s) ||
-      target.margin_s < 0 || !std::isfinite(target.min_travel_mm) ||
+      target.margin_s < 0 || !std::isfinite(target.follow_s) || target.follow_s < 0 ||
+      !std::isfinite(target.min_travel_mm) ||
       !std::isfinite(target.max_travel_mm)) {
     return Error{Errc::kInvalidArgument,
-                 "intercept: start, margin and travels must be finite, start and margin >= 0"};
+                 "intercept: start, margin, follow time and travels must be finite, start, margin and "
+                 "follow time >= 0"};
   }
   if (!target.at_stamp.matrix().allFinite()) {
     return Error{Errc::kInvalidArgument, "intercept: the target's pose is not finite"};
@@ -303,9 +371,91 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
   }
   int candidates = 0;
   std::string last_failure;              // the last meeting point the robot cannot reach
+  std::string follow_failure;            // the last one it cannot follow the target from
   double late_s = -1.0;                  // how late at the last one it reaches (-1: none)
   double late_travel_mm = 0.0;
-  // Plans the meeting at time t; true when the robot is there in time.
+  // The meeting ramp: the shortest of D0, 2 D0, 4 D0, 8 D0 along which the joints can take
+  // up the target's pace at the meeting point and follow it within the shares of their limits
+  // above. D0: the tool's acceleration along the path that the joints' share allows at the
+  // wait point (their rates per mm along it), velocity terms aside: the arm's own limits, not
+  // the planner's choice for straight-line moves.
+  const trajectory::JointLimits limits = joint_limits(model_);
+  const Eigen::Vector3d direction = target.velocity_mm_s / speed;
+  struct ShortestRamp {
+    double length_mm = 0.0;
+    int joint = -1;         ///< the joint whose acceleration limit sets it (-1: the planner's)
+    double accel = 0.0;     ///< the tool's acceleration along the path it allows [mm/s^2]
+  };
+  const auto shortest_ramp = [&](const trajectory::JointVector& q_wait,
+                                 const Eigen::Isometry3d& wait) {
+    Eigen::Isometry3d ahead = wait;
+    ahead.pretranslate(direction);  // 1 mm on
+    ShortestRamp out;
+    out.accel = 1e300;
+    if (auto q = model_.inverse(ahead, q_wait); q) {
+      for (Eigen::Index j = 0; j < q->size(); ++j) {
+        const double per_mm = std::abs((*q)[j] - q_wait[j]);
+        if (per_mm > 1e-12 && kFollowAccelShare * limits.max_acceleration[j] / per_mm < out.accel) {
+          out.accel = kFollowAccelShare * limits.max_acceleration[j] / per_mm;
+          out.joint = static_cast<int>(j);
+        }
+      }
+    }
+    if (out.joint < 0) {  // no joint moves along the path there (or 1 mm on is out of reach)
+      out.accel = options_.linear.max_accel_mm_s2;
+    }
+    out.length_mm = speed * speed / (2.0 * out.accel);
+    return out;
+  };
+  // The ramp from the wait point, or none: follow_failure says what the joints could not do,
+  // last_failure where the following left the reach.
+  auto ramp_at = [&](const trajectory::JointVector& q_wait,
+                     const Eigen::Isometry3d& wait) -> std::optional<trajectory::MeetingRamp> {
+    FollowDemand least;
+    least.share = 1e300;
+    const ShortestRamp shortest = shortest_ramp(q_wait, wait);
+    for (int k = 0; k < 4; ++k) {
+      const trajectory::MeetingRamp ramp{shortest.length_mm * (1 << k)};
+      auto followed = follow_demand(model_, limits, q_wait, wait, target.velocity_mm_s, ramp,
+                                    target.follow_s);
+      if (!followed) {
+        if (k == 0) {
+          follow_failure = fmt::format(
+              "taking up the target's pace at {:.0f} mm/s from ({:.0f}, {:.0f}, {:.0f}) mm "
+              "needs a ramp of {:.0f} mm at least ({:.0f} mm/s^2 along its path: {}), and {}",
+              speed, wait.translation().x(), wait.translation().y(), wait.translation().z(),
+              ramp.length_mm, shortest.accel,
+              shortest.joint >= 0
+                  ? fmt::format("{} at {:.0f} % of its acceleration limit",
+                                limits.names[static_cast<std::size_t>(shortest.joint)],
+                                100.0 * kFollowAccelShare)
+                  : std::string("the planner's linear acceleration"),
+              followed.error().message);
+        } else {
+          last_failure = followed.error().message;
+        }
+        break;  // a longer ramp runs further
+      }
+      if (followed->share <= 1.0) {
+        return ramp;
+      }
+      if (followed->share < least.share) {
+        least = *followed;
+      }
+    }
+    if (least.joint >= 0) {
+      follow_failure = fmt::format(
+          "following the target at {:.0f} mm/s from ({:.0f}, {:.0f}, {:.0f}) mm needs {} at "
+          "{:.2f} times its {} limit {:.0f} mm past it (a meeting may use {:.0f} % of it)",
+          speed, wait.translation().x(), wait.translation().y(), wait.translation().z(),
+          limits.names[static_cast<std::size_t>(least.joint)], least.ratio,
+          least.acceleration ? "acceleration" : "speed", least.at_mm,
+          100.0 * (least.acceleration ? kFollowAccelShare : kFollowSpeedShare));
+    }
+    return std::nullopt;
+  };
+  // Plans the meeting at time t (the target at the wait point); true when the robot is there in
+  // time (before the target comes within the ramp) and the ramp and the following fit.
   auto meet_at = [&](double t, Intercept& out) {
     ++candidates;
     Eigen::Isometry3d pose = target.at_stamp;
@@ -316,8 +466,26 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
       return false;
     }
     const double arrive_s = target.start_s + plan->trajectory.duration_s();
-    if (arrive_s + target.margin_s > t) {
-      late_s = arrive_s + target.margin_s - t;
+    const auto late_by = [&](double ramp_mm) {
+      return arrive_s + target.margin_s - (t - ramp_mm / speed);
+    };
+    if (late_by(0.0) > 0.0) {  // late even without a ramp: no need to try them
+      late_s = late_by(0.0);
+      late_travel_mm = speed * t;
+      return false;
+    }
+    const auto ramp = ramp_at(plan->trajectory.end(), pose);
+    if (!ramp) {
+      return false;
+    }
+    if (target.max_travel_mm > 0.0 && speed * t + ramp->length_mm > target.max_travel_mm) {
+      last_failure = fmt::format("the meeting ramp ({:.0f} mm) from {:.0f} mm runs past the "
+                                 "window's end",
+                                 ramp->length_mm, speed * t);
+      return false;
+    }
+    if (late_by(ramp->length_mm) > 0.0) {
+      late_s = late_by(ramp->length_mm);
       late_travel_mm = speed * t;
       return false;
     }
@@ -325,6 +493,7 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
     out.meet = pose;
     out.meet_s = t;
     out.travel_mm = speed * t;
+    out.ramp_mm = ramp->length_mm;
     return true;
   };
   const double step_s = 10.0 / speed;  // 10 mm of the target's travel
@@ -359,14 +528,16 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
       "cannot meet the target at {:.0f} mm/s within its window ({:.0f} to {:.0f} mm along its "
       "path)",
       speed, speed * t_first, speed * t_last);
+  const std::string follow =
+      follow_failure.empty() ? "" : fmt::format("{}{}", late_s >= 0.0 || !last_failure.empty() ? "; " : "", follow_failure);
   if (late_s >= 0.0) {
     return Error{Errc::kOutOfRange,
                  fmt::format("{}: at {:.0f} mm, the last point the robot reaches, it would be "
-                             "{:.0f} ms late{}",
+                             "{:.0f} ms late{}{}",
                              window, late_travel_mm, late_s * 1e3,
-                             last_failure.empty() ? "" : "; beyond: " + last_failure)};
+                             last_failure.empty() ? "" : "; beyond: " + last_failure, follow)};
   }
-  return Error{Errc::kOutOfRange, fmt::format("{}: {}", window, last_failure)};
+  return Error{Errc::kOutOfRange, fmt::format("{}: {}{}", window, last_failure, follow)};
 }
 
 }  // namespace cell::motion

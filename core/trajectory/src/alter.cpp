@@ -4,6 +4,25 @@
 
 namespace cell::trajectory {
 
+double MeetingRamp::displacement(double d_mm) const noexcept {
+  const double ramp = length_mm;
+  if (ramp <= 0.0 || d_mm >= ramp) {
+    return ramp <= 0.0 ? std::max(0.0, d_mm) : d_mm;
+  }
+  if (d_mm <= -ramp) {
+    return 0.0;
+  }
+  return (d_mm + ramp) * (d_mm + ramp) / (4.0 * ramp);
+}
+
+double MeetingRamp::rate(double d_mm) const noexcept {
+  const double ramp = length_mm;
+  if (ramp <= 0.0) {
+    return d_mm > 0.0 ? 1.0 : 0.0;
+  }
+  return std::clamp((d_mm + ramp) / (2.0 * ramp), 0.0, 1.0);
+}
+
 void AlterState::submit(const AlterCorrection& correction) noexcept {
   pending_ = correction;  // last one in a cycle wins
   has_pending_ = true;

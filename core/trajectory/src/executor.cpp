@@ -26,6 +26,7 @@ void TrajectoryExecutor::load(JointTrajectory trajectory, double start_s, bool a
   state_ = trajectory_.knots().empty() ? ExecState::kIdle : ExecState::kMoving;
   has_last_ = false;
   has_ref_ = false;
+  max_lag_mm_ = 0.0;
   // Setpoints still moving (tracking, braking after ALTOFF) join the new path through the
   // limiter; at rest the path starts where they are, as planned.
   limiting_ = limiter_live_ && limiter_.bounded() && limiter_.qd().size() > 0 &&
@@ -148,6 +149,10 @@ ExecState TrajectoryExecutor::step(double now_s, JointSample& out) {
     if (alter_enabled_ || limiting_) {
       // The altered path (or a path the setpoints have not yet joined), through the limits.
       const bool held_off = limiter_.step(out.q, out.qd, dt);
+      if (held_off) {  // how far the tool is off the path there
+        const double lag = (forward_(limiter_.q()).translation() - forward_(out.q).translation()).norm();
+        max_lag_mm_ = std::max(max_lag_mm_, lag);
+      }
       limiting_ = alter_enabled_ || held_off;
       out.q = limiter_.q();
       out.qd = limiter_.qd();

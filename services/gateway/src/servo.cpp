@@ -36,6 +36,21 @@ std::string_view command_name(cell_robot_RobotCommandKind kind) {
   return "unknown";
 }
 
+/// The relative slack a plan's speeds and accelerations may take over the arm's limits and
+/// still be accepted (check_limits: its knots' cubics overshoot a little where a profile
+/// turns, by up to ~2 % in speed).
+constexpr double kPlanSlack = 0.02;
+
+/// What the executor's setpoints keep (TrajectoryExecutor, JointLimiter): the speeds an
+/// accepted plan may take, so that it passes unchanged (at the bare limits, the setpoints of
+/// a joint move 1-2 % over them lagged it by 12 mm/s, 4 mm at its end), and the accelerations
+/// within 1 % of the limits (issue 23's bound on the sampled path).
+trajectory::JointLimits setpoint_limits(trajectory::JointLimits limits) {
+  limits.max_velocity *= 1.0 + kPlanSlack;
+  limits.max_acceleration *= 1.01;
+  return limits;
+}
+
 }  // namespace
 
 Servo::Servo(const kinematics::RobotModel& model, std::unique_ptr<RobotDriver> driver,
@@ -45,7 +60,7 @@ Servo::Servo(const kinematics::RobotModel& model, std::unique_ptr<RobotDriver> d
       start_tolerance_rad_(start_tolerance_rad),
       start_tolerance_mm_(start_tolerance_mm),
       limits_(motion::joint_limits(model)),
-      executor_(motion::forward_fn(model), motion::inverse_fn(model)) {}
+      executor_(motion::forward_fn(model), motion::inverse_fn(model), setpoint_limits(limits_)) {}
 
 double Servo::seconds(Clock::time_point t) const {
   return std::chrono::duration<double>(t - epoch_).count();
@@ -100,7 +115,7 @@ Status Servo::post_trajectory(motion::Plan plan, std::string trajectory_id) {
                  fmt::format("trajectory has {} joints, robot '{}' has {}", plan.trajectory.dof(),
                              model_.id(), model_.dof())};
   }
-  CELL_TRY(trajectory::check_limits(plan.trajectory, limits_, 0.02));
+  CELL_TRY(trajectory::check_limits(plan.trajectory, limits_, kPlanSlack));
   std::lock_guard lock(mutex_);
   switch (snapshot_.mode) {
     case cell_robot_MODE_FAULT:
@@ -322,6 +337,20 @@ void Servo::apply_commands(
         break;
       case cell_robot_CMD_ALTER_OFF:
         executor_.alter_off();
+        if (const std::uint64_t n = executor_.limited_cycles(); n != limited_reported_) {
+          // The corrections asked more than the arm can do: the setpoints kept its limits and
+          // lagged the altered path. Under a millimetre: the steps of a correction's rate
+          // between corrections, smoothed (information); more: a tracking that may have
+          // missed its part (a warning).
+          const double lag = executor_.max_lag_mm();
+          event(lag < 1.0 ? cell_health_SEVERITY_INFO : cell_health_SEVERITY_WARNING,
+                "robot.alter_limited",
+                fmt::format("robot '{}': the ALTER corrections asked more than the joint "
+                            "limits in {} cycles; the setpoints kept the limits and lagged the "
+                            "altered path by up to {:.3f} mm",
+                            model_.id(), n - limited_reported_, lag));
+          limited_reported_ = n;
+        }
         break;
       case cell_robot_CMD_SET_GAINS:
         status = driver_->command(DriverCommand::kSetGains, args);

@@ -123,6 +123,7 @@ class Servo {
   double start_tolerance_mm_;
   trajectory::JointLimits limits_;
   trajectory::TrajectoryExecutor executor_;
+  std::uint64_t limited_reported_ = 0;  ///< executor_.limited_cycles() already reported
   Clock::time_point epoch_;
 
   // Servo-thread state.

@@ -148,6 +148,7 @@ void MotionService::publish(const std::string& motion_id, const cell_common_Requ
   if (meeting != nullptr) {
     s.meet_target = motion::to_idl(meeting->pose);
     s.meet_stamp_ns = meeting->stamp_ns;
+    s.meet_ramp_mm = meeting->ramp_mm;
   }
   if (auto st = status_writer_.write(s); !st) {
     log::warn("status", st.error().message, {{"motion", motion_id}});
@@ -262,13 +263,18 @@ Result<motion::Plan> MotionService::plan(const cell_motion_MotionRequest& reques
       moving.min_travel_mm = request.meet_from_mm;
       moving.max_travel_mm = request.meet_to_mm;
       moving.joint_interpolated = request.track_joint_interpolated;
+      moving.follow_s = request.meet_follow_s > 0.0 && std::isfinite(request.meet_follow_s)
+                            ? request.meet_follow_s
+                            : planner.options().gripper_dwell_s;
       auto met = planner.intercept(q0, moving, request.alter_cumulative,
                                    request.alter_world_frame, scale);
       if (!met) {
         return std::move(met).error();
       }
-      meeting = Meeting{met->meet, request.target_stamp_ns +
-                                       static_cast<std::int64_t>(std::llround(met->meet_s * 1e9))};
+      meeting = Meeting{met->meet,
+                        request.target_stamp_ns +
+                            static_cast<std::int64_t>(std::llround(met->meet_s * 1e9)),
+                        met->ramp_mm};
       return std::move(met->plan);
     }
     default:

@@ -48,6 +48,7 @@ class MotionService {
   struct Meeting {
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< base_T_tool
     std::int64_t stamp_ns = 0;                               ///< wall clock
+    double ramp_mm = 0.0;                                    ///< the meeting ramp (Intercept)
   };
 
   struct Active {  // a motion sent to a gateway, not finished yet

@@ -404,10 +404,12 @@ class ConveyorJob {
     // Where to meet the part: the motion service plans it in one round trip (the earliest
     // point of the part's path the arm reaches kMeetMarginS before the part, inside the belt
     // window with room for the grip: the chapter's downstream limit, checked before the arm
-    // moves) and sends the track there. The robot goes there with ALTER on; the correction,
-    // shift(t) - lead, stays 0 until the part arrives, then follows the belt: continuous
-    // from 0, so the arm never jumps, at any belt speed. lead is the belt travel since
-    // exposure at the meeting point.
+    // moves) and sends the track there. The robot goes there with ALTER on; the correction
+    // stays 0 until the part comes within the meeting ramp of it, then takes up the belt's pace
+    // along the ramp (f(d) of the part's travel d = shift(t) - lead past the meeting point:
+    // trajectory::MeetingRamp), and follows the belt from d = D on: continuous in position and
+    // speed, so the arm never jumps, at any belt speed it can follow. lead is the belt travel
+    // since exposure at the meeting point.
     const int seq = p["seq"].get<int>() + 1;
     p["seq"] = seq;
     const std::string track_id = fresh(run_, "track", seq);
@@ -427,6 +429,7 @@ class ConveyorJob {
     r.target_velocity_mm_per_s = {v_belt.x(), v_belt.y(), v_belt.z()};
     r.target_stamp_ns = frame.exposure_ns;
     r.meet_margin_s = kMeetMarginS;
+    r.meet_follow_s = spec_.dwell_s;
     const double s_exposure = along(belt, at_exposure);
     r.meet_from_mm = spec_.upstream_mm - s_exposure;
     // The grip's end (following the part through the dwell) inside the window too: the
@@ -489,6 +492,10 @@ class ConveyorJob {
     const double lead_mm = (first->meet_target.translation() - at_exposure).dot(belt.direction);
     const double s_meet = s_exposure + lead_mm;
     const Eigen::Vector3d lead = belt.direction * lead_mm;
+    // The arm waits at the meeting point and takes up the part's pace along the meeting ramp
+    // the motion service planned within its joints' limits (no velocity step: held to its
+    // limits, the arm would lag the part and the gripper close beside it).
+    const trajectory::MeetingRamp ramp{first->meet_ramp_mm};
     run_.report(fmt::format("tracking part ({} picked)", picked()), fraction());
     // Stage 2: ALTER every cycle until the motion arrives, then through the grip.
     std::uint64_t cycle = 0;
@@ -514,7 +521,10 @@ class ConveyorJob {
       }
       if (!trajectory_id.empty()) {
         if (const auto latest = run_.links().belt(spec_.belt); latest) {
-          Eigen::Vector3d c = shift_at(latest->count) - lead;
+          // d: the part's travel past the meeting point; the arm's along the ramp.
+          const double d = (shift_at(latest->count) - lead).dot(belt.direction);
+          Eigen::Vector3d c = belt.direction * ramp.displacement(d);
+          const double pace = ramp.rate(d);  // the arm's speed as a fraction of the belt's
           // Never past the window's downstream limit: there the part escapes (the arm holds
           // at the limit and this part is counted outside the window).
           if (s_meet + c.dot(belt.direction) > downstream) {
@@ -522,7 +532,7 @@ class ConveyorJob {
             escaped = true;
           }
           const bool met = c.dot(belt.direction) > 0.0;
-          part_met = part_met || met;
+          part_met = part_met || ramp.on_target(d);
           // The rate only while following: held at the limit (or waiting), the gateway must
           // not extrapolate the correction further. Near the limit, the extrapolation (at the
           // belt's rate, whatever the link delays) may run only until the limit, never past
@@ -533,10 +543,10 @@ class ConveyorJob {
           double horizon_s = 0.0;  // the gateway's own
           if (met && !escaped) {
             const double room = downstream - (s_meet + c.dot(belt.direction));
-            rate = v_belt;
-            if (speed * trajectory::AlterState::kExtrapolationHorizonS > room) {
+            rate = v_belt * pace;
+            if (speed * pace * trajectory::AlterState::kExtrapolationHorizonS > room) {
               // At least 1 us: 0 would mean the gateway's horizon.
-              horizon_s = std::max(1e-6, room / speed);
+              horizon_s = std::max(1e-6, room / (speed * pace));
             }
           }
           (void)run_.links().alter(robot_id, trajectory_id, ++cycle,
@@ -571,9 +581,10 @@ class ConveyorJob {
     }
     // At the meeting point: wait for the part (ALTER then follows it), close the gripper,
     // keep tracking through the dwell.
-    const auto meet_deadline = Clock::now() + std::chrono::duration<double>(
-                                                  1.0 + 2.0 * kMeetMarginS +
-                                                  (speed > 1.0 ? 200.0 / speed : 0.0));
+    const auto meet_deadline =
+        Clock::now() + std::chrono::duration<double>(
+                           1.0 + 2.0 * kMeetMarginS +
+                           (speed > 1.0 ? (200.0 + 2.0 * ramp.length_mm) / speed : 0.0));
     while (!part_met && Clock::now() < meet_deadline) {
       if (control_interrupted()) {
         stop_robot();

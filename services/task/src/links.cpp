@@ -1,5 +1,6 @@
 #include "links.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <thread>
 
@@ -306,6 +307,7 @@ std::optional<Links::MotionUpdate> Links::poll_motion(std::uint64_t seq) {
       if (auto meet = geometry::pose_from_idl(s->meet_target); meet) {
         u.meet_target = *meet;
         u.meet_stamp_ns = s->meet_stamp_ns;
+        u.meet_ramp_mm = std::isfinite(s->meet_ramp_mm) ? std::max(0.0, s->meet_ramp_mm) : 0.0;
       }
     }
     if (!latest || !latest->terminal) {

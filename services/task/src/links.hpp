@@ -189,6 +189,7 @@ class Links {
     /// meet_stamp_ns 0 otherwise.
     Eigen::Isometry3d meet_target = Eigen::Isometry3d::Identity();
     std::int64_t meet_stamp_ns = 0;
+    double meet_ramp_mm = 0.0;  ///< the meeting ramp (idl/motion.idl, MotionStatus)
   };
   std::optional<MotionUpdate> poll_motion(std::uint64_t seq);
 

@@ -22,18 +22,29 @@ struct MovingTarget {
   double start_s = 0.0;   ///< when the robot starts moving, from the stamp (>= 0)
   double margin_s = 0.0;  ///< the robot is at the meeting point this long before the target
   /// The meeting point lies between these travels from at_stamp along the velocity [mm] (a
-  /// belt window); max_travel_mm <= 0: no limit but the robot's reach (and 5 s of travel).
+  /// belt window), and so does the end of its meeting ramp, where the robot is on the target
+  /// (the caller keeps room past max_travel_mm for what follows: the grip);
+  /// max_travel_mm <= 0: no limit but the robot's reach (and 5 s of travel).
   double min_travel_mm = 0.0;
   double max_travel_mm = 0.0;
   bool joint_interpolated = false;  ///< joint move to the meeting point, else a straight line
+  /// How long the robot must follow the target once on it (the gripper's closing and dwell),
+  /// within its reach and the joints' speed and acceleration limits [s].
+  double follow_s = 0.2;
 };
 
 /// Where and when the robot meets a MovingTarget, and the plan that takes it there.
+/// The robot waits at rest at the meeting point (`meet`, the plan's end) and takes up the
+/// target's pace along the meeting ramp (trajectory::MeetingRamp, `ramp_mm`): the ALTER
+/// corrections displace it by f(d) for the target's travel d past `meet`; it is on the target
+/// from d = ramp_mm on, and can follow it for MovingTarget::follow_s from there within the
+/// joints' limits and the window.
 struct Intercept {
   Plan plan;                    ///< to the meeting point, ALTER enabled
-  Eigen::Isometry3d meet;       ///< base_T_tool at the meeting point
+  Eigen::Isometry3d meet;       ///< base_T_tool at the meeting point (where the robot waits)
   double meet_s = 0.0;          ///< when the target reaches it, from its stamp
   double travel_mm = 0.0;       ///< from at_stamp along the velocity
+  double ramp_mm = 0.0;         ///< the meeting ramp's length D
   int candidates = 0;           ///< meeting points planned to find it (its cost)
 };
 
@@ -100,12 +111,16 @@ class Planner {
                      bool joint_interpolated = false) const;
 
   /// Plans where to meet a moving target: the earliest point of its path that the robot,
-  /// starting at target.start_s from q0, reaches target.margin_s before the target does,
-  /// within the travel window (the conveyor chapter's downstream limit checked before the
-  /// robot moves), and the track there (ALTER enabled: the caller's corrections make the
-  /// destination follow the target once it arrives). Found by stepping the meeting time
-  /// along the path (10 mm of travel a step) and then halving the last step to 0.2 mm, so
-  /// the earliest meeting is found even where a later one needs a longer move.
+  /// starting at target.start_s from q0, reaches target.margin_s before the target comes
+  /// within the meeting ramp of it, from which it can take up the target's pace and follow
+  /// it for target.follow_s within the joints' speed and acceleration limits (the ramp is the
+  /// shortest of D0, 2 D0, 4 D0, 8 D0 that can, D0 from the joints' acceleration limits
+  /// there), the ramp's end within the travel window (the conveyor chapter's downstream limit
+  /// checked before the robot moves), and the track there (ALTER enabled: the caller's
+  /// corrections, along the ramp, make the destination follow the target once it arrives).
+  /// Found by stepping the meeting time along the path (10 mm of travel a step) and then
+  /// halving the last step to 0.2 mm, so the earliest meeting is found even where a later one
+  /// needs a longer move.
   /// Errors: kOutOfRange when no point of the window can be met (the reason gives the last
   /// planning failure, if any, and how late the robot would be at the window's end);
   /// kInvalidArgument on a zero or non-finite velocity or bad times.

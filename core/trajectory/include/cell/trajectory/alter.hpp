@@ -30,6 +30,24 @@ struct AlterCorrection {
   double horizon_s = 0.0;
 };
 
+/// The meeting ramp: how a robot waiting at rest on a moving target's path takes up the
+/// target's pace without a velocity step (which no arm can follow: its joints would lag, and
+/// the gripper close beside the part). With d the target's travel past the wait point and D
+/// the ramp's length, the robot's displacement along the path is
+///   f(d) = 0 (d <= -D),  (d + D)^2 / 4D (-D < d < D),  d (d >= D):
+/// it starts when the target is D short of it, accelerates at v^2 / 2D (v the target's speed),
+/// and is on the target, at its speed, from d = D on (D past the wait point). C1, so the
+/// corrections keep a bounded acceleration. D = 0: the target's travel itself (a step).
+struct MeetingRamp {
+  double length_mm = 0.0;  ///< D
+  /// f(d) [mm].
+  double displacement(double d_mm) const noexcept;
+  /// f'(d): the robot's speed as a fraction of the target's.
+  double rate(double d_mm) const noexcept;
+  /// True from d = D on: the robot is on the target.
+  bool on_target(double d_mm) const noexcept { return d_mm >= length_mm; }
+};
+
 /// The executor's side of ALTER for one move. Corrections arrive at any rate; the executor
 /// calls begin_cycle() once per trajectory cycle: only the last correction submitted during a
 /// cycle is used (V+: "if ALTER is executed more often, only the last set of values defined

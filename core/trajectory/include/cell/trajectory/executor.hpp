@@ -75,6 +75,9 @@ class TrajectoryExecutor {
   const Error& failure() const noexcept { return failure_; }
   /// Cycles (cumulative) in which the joint limits held the setpoints off the altered path.
   std::uint64_t limited_cycles() const noexcept { return limiter_.limited_steps(); }
+  /// The largest distance [mm] of the tool from the altered path (or the path being joined)
+  /// while the limits held it off, since the last load().
+  double max_lag_mm() const noexcept { return max_lag_mm_; }
 
  private:
   ForwardFn forward_;
@@ -97,6 +100,7 @@ class TrajectoryExecutor {
   double last_dt_s_ = 0.0;     ///< the last cycle's length
   JointVector last_ref_q_;     ///< the altered path's last point (its speed by difference)
   bool has_ref_ = false;
+  double max_lag_mm_ = 0.0;
 };
 
 }  // namespace cell::trajectory
