@@ -38,6 +38,24 @@ struct Sampled {
   }
 };
 
+/// A gantry's limiter (100 mm/s, 1000 mm/s^2) at rest at the origin, its samples recorded.
+struct AtRest {
+  static constexpr double kVMax = 100.0;
+  static constexpr double kAMax = 1000.0;
+  Gantry gantry{kVMax, kAMax};
+  JointLimiter limiter{gantry.limits};
+  Sampled s;
+  AtRest() {
+    limiter.reset(jv({0, 0, 0}), jv({0, 0, 0}));
+    s.add(limiter.q());
+  }
+  /// The samples kept the bounds.
+  void expect_within_bounds() const {
+    EXPECT_LE(s.peak_accel.maxCoeff(), kAMax * (1 + 1e-9));
+    EXPECT_LE(s.peak_speed.maxCoeff(), kVMax * (1 + 1e-9));
+  }
+};
+
 // A reference within the bounds (a sine whose speed and acceleration peak at 80 % of them) is
 // the output, to rounding, from the first step on: the limiter changes nothing it need not.
 TEST(JointLimiter, AReferenceWithinTheBoundsIsTheOutput) {
@@ -66,19 +84,14 @@ TEST(JointLimiter, AReferenceWithinTheBoundsIsTheOutput) {
 // are whole cycles; the distance left is not: 0.12 um here), and it arrives within a few
 // cycles of the time-optimal bang-bang profile.
 TEST(JointLimiter, AStepIsJoinedAtTheBoundsInTheTimeOptimalTimeWithoutOvershoot) {
-  const double v_max = 100.0;
-  const double a_max = 1000.0;
-  const Gantry g(v_max, a_max);
-  JointLimiter limiter(g.limits);
-  Sampled s;
-  limiter.reset(jv({0, 0, 0}), jv({0, 0, 0}));
-  s.add(limiter.q());
+  AtRest arm;
+  JointLimiter& limiter = arm.limiter;
   const JointVector target = jv({50.0, -5.0, 0.0});
   int arrived = -1;
   double overshoot = 0;
   for (int k = 1; k <= 2000; ++k) {
     const bool limited = limiter.step(target, JointVector::Zero(3), kDt);
-    s.add(limiter.q());
+    arm.s.add(limiter.q());
     overshoot = std::max({overshoot, limiter.q()[0] - 50.0, -5.0 - limiter.q()[1]});
     if (!limited && arrived < 0) {
       arrived = k;
@@ -87,9 +100,8 @@ TEST(JointLimiter, AStepIsJoinedAtTheBoundsInTheTimeOptimalTimeWithoutOvershoot)
       EXPECT_FALSE(limited) << "step " << k << ": left the target after reaching it";
     }
   }
-  EXPECT_LE(s.peak_accel.maxCoeff(), a_max * (1 + 1e-9));
-  EXPECT_LE(s.peak_speed.maxCoeff(), v_max * (1 + 1e-9));
-  EXPECT_LT(overshoot, a_max * kDt * kDt);
+  arm.expect_within_bounds();
+  EXPECT_LT(overshoot, AtRest::kAMax * kDt * kDt);
   // X: accelerate to 100 mm/s in 0.1 s (5 mm), cruise 40 mm (0.4 s), brake 0.1 s: 0.6 s.
   ASSERT_GT(arrived, 0);
   EXPECT_NEAR(arrived * kDt, 0.6, 0.005);
@@ -100,24 +112,19 @@ TEST(JointLimiter, AStepIsJoinedAtTheBoundsInTheTimeOptimalTimeWithoutOvershoot)
 // A reference moving at twice the speed bound is followed at the bound, lagging; when it
 // stops, the output catches up and rests on it, every sample within the bounds.
 TEST(JointLimiter, AReferenceFasterThanTheArmIsFollowedAtTheBoundAndCaughtWhenItStops) {
-  const double v_max = 100.0;
-  const double a_max = 1000.0;
-  const Gantry g(v_max, a_max);
-  JointLimiter limiter(g.limits);
-  Sampled s;
-  limiter.reset(jv({0, 0, 0}), jv({0, 0, 0}));
-  s.add(limiter.q());
+  AtRest arm;
+  JointLimiter& limiter = arm.limiter;
+  constexpr double v_max = AtRest::kVMax;
   double lag = 0;
   for (int k = 1; k <= 2000; ++k) {
     const double t = k * kDt;
     const bool moving = t <= 0.5;
     const double r = 2 * v_max * std::min(t, 0.5);
     limiter.step(jv({r, 0, 0}), jv({moving ? 2 * v_max : 0.0, 0, 0}), kDt);
-    s.add(limiter.q());
+    arm.s.add(limiter.q());
     lag = std::max(lag, r - limiter.q()[0]);
   }
-  EXPECT_LE(s.peak_accel.maxCoeff(), a_max * (1 + 1e-9));
-  EXPECT_LE(s.peak_speed.maxCoeff(), v_max * (1 + 1e-9));
+  arm.expect_within_bounds();
   EXPECT_GT(lag, 45.0);  // half of the reference's 100 mm, and the start's 5 mm
   EXPECT_NEAR(limiter.q()[0], 100.0, 1e-9);
   EXPECT_GT(limiter.limited_steps(), 500U);
