@@ -4,7 +4,8 @@
 //  - the table job: 15 ICs of the thesis's table, picks per minute;
 //  - the belt at 0.5 m/s: picks per minute at a part every 2 s and every 1.2 s, and the time
 //    from the exposure to the tracking motion under way (the chapter's major cycle: 16 ms);
-//  - the belt at 2 m/s, the same (tests/task asserts the 95 %; here it is measured).
+//  - the belt at 2 m/s, the same (the picker cannot follow it within its joints' limits: the
+//    parts are refused, each with its reason; tests/task checks that).
 // Calibrations are the simulator's truth (the subject is the task service). Run:
 //   build/bin/task_bench            (about 5 minutes)      build/bin/task_bench --quick
 //   build/bin/task_bench --only belt-20-2   (one measure: accept, table, belt-05-2, belt-05-12,
