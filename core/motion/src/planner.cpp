@@ -298,8 +298,10 @@ constexpr double kFollowAccelShare = 0.5;
 Result<FollowDemand> follow_demand(const kinematics::RobotModel& model,
                                    const trajectory::JointLimits& limits,
                                    const trajectory::JointVector& q_wait,
-                                   const Eigen::Isometry3d& wait, const Eigen::Vector3d& velocity,
-                                   const trajectory::MeetingRamp& ramp, double follow_s) {
+                                   const Eigen::Isometry3d& wait,
+                                   const Eigen::Vector3d& velocity,
+                                   const trajectory::MeetingRamp& ramp,
+                                   double follow_s) {
   constexpr double kDt = 0.001;
   const double speed = velocity.norm();
   const Eigen::Vector3d direction = velocity / speed;
@@ -349,11 +351,11 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
   }
   if (!std::isfinite(target.start_s) || target.start_s < 0 || !std::isfinite(target.margin_s) ||
       target.margin_s < 0 || !std::isfinite(target.follow_s) || target.follow_s < 0 ||
-      !std::isfinite(target.min_travel_mm) ||
-      !std::isfinite(target.max_travel_mm)) {
-    return Error{Errc::kInvalidArgument,
-                 "intercept: start, margin, follow time and travels must be finite, start, margin and "
-                 "follow time >= 0"};
+      !std::isfinite(target.min_travel_mm) || !std::isfinite(target.max_travel_mm)) {
+    return Error{
+        Errc::kInvalidArgument,
+        "intercept: start, margin, follow time and travels must be finite, start, margin and "
+        "follow time >= 0"};
   }
   if (!target.at_stamp.matrix().allFinite()) {
     return Error{Errc::kInvalidArgument, "intercept: the target's pose is not finite"};
@@ -383,8 +385,8 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
   const Eigen::Vector3d direction = target.velocity_mm_s / speed;
   struct ShortestRamp {
     double length_mm = 0.0;
-    int joint = -1;         ///< the joint whose acceleration limit sets it (-1: the planner's)
-    double accel = 0.0;     ///< the tool's acceleration along the path it allows [mm/s^2]
+    int joint = -1;      ///< the joint whose acceleration limit sets it (-1: the planner's)
+    double accel = 0.0;  ///< the tool's acceleration along the path it allows [mm/s^2]
   };
   const auto shortest_ramp = [&](const trajectory::JointVector& q_wait,
                                  const Eigen::Isometry3d& wait) {
@@ -416,8 +418,8 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
     const ShortestRamp shortest = shortest_ramp(q_wait, wait);
     for (int k = 0; k < 4; ++k) {
       const trajectory::MeetingRamp ramp{shortest.length_mm * (1 << k)};
-      auto followed = follow_demand(model_, limits, q_wait, wait, target.velocity_mm_s, ramp,
-                                    target.follow_s);
+      auto followed =
+          follow_demand(model_, limits, q_wait, wait, target.velocity_mm_s, ramp, target.follow_s);
       if (!followed) {
         if (k == 0) {
           follow_failure = fmt::format(
@@ -479,9 +481,10 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
       return false;
     }
     if (target.max_travel_mm > 0.0 && speed * t + ramp->length_mm > target.max_travel_mm) {
-      last_failure = fmt::format("the meeting ramp ({:.0f} mm) from {:.0f} mm runs past the "
-                                 "window's end",
-                                 ramp->length_mm, speed * t);
+      last_failure = fmt::format(
+          "the meeting ramp ({:.0f} mm) from {:.0f} mm runs past the "
+          "window's end",
+          ramp->length_mm, speed * t);
       return false;
     }
     if (late_by(ramp->length_mm) > 0.0) {
@@ -529,7 +532,9 @@ Result<Intercept> Planner::intercept(const trajectory::JointVector& q0,
       "path)",
       speed, speed * t_first, speed * t_last);
   const std::string follow =
-      follow_failure.empty() ? "" : fmt::format("{}{}", late_s >= 0.0 || !last_failure.empty() ? "; " : "", follow_failure);
+      follow_failure.empty()
+          ? ""
+          : fmt::format("{}{}", late_s >= 0.0 || !last_failure.empty() ? "; " : "", follow_failure);
   if (late_s >= 0.0) {
     return Error{Errc::kOutOfRange,
                  fmt::format("{}: at {:.0f} mm, the last point the robot reaches, it would be "

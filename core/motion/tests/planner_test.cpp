@@ -6,10 +6,10 @@
 #include <cstdint>
 #include <cstdio>
 #include <fstream>
+#include <numbers>
 #include <random>
 #include <regex>
 #include <sstream>
-#include <numbers>
 #include <vector>
 
 #include <fmt/format.h>
@@ -21,8 +21,8 @@
 #include "cell/motion/robot_adapters.hpp"
 #include "cell/testing/env.hpp"
 #include "cell/testing/matchers.hpp"
-#include "cell/trajectory/executor.hpp"
 #include "cell/testing/vectors.hpp"
+#include "cell/trajectory/executor.hpp"
 #include "joint_vectors.hpp"
 
 namespace cell::motion {
@@ -303,9 +303,9 @@ TEST(Planner, ExcaliburApproachesAlongTheToolAxis) {
 /// ALTOFF and its braking to rest, and `peak_accel` gets the largest sampled joint acceleration
 /// of the whole path as a fraction of its joint's limit.
 struct TrackingRun {
-  double worst_mm = 0;          ///< tool to part, from arrival through the gripper's closing
-  double peak_accel = 0;        ///< largest sampled joint acceleration / its limit (limited)
-  std::uint64_t held_off = 0;   ///< cycles the limits held the setpoints off the altered path
+  double worst_mm = 0;         ///< tool to part, from arrival through the gripper's closing
+  double peak_accel = 0;       ///< largest sampled joint acceleration / its limit (limited)
+  std::uint64_t held_off = 0;  ///< cycles the limits held the setpoints off the altered path
 };
 TrackingRun picker_tracking(double belt_mm_s, double cycle_s, bool limited) {
   const kinematics::RobotModel model = robot("scara_picker");
@@ -377,10 +377,11 @@ TrackingRun picker_tracking(double belt_mm_s, double cycle_s, bool limited) {
       peak = std::max(peak, accel.cwiseAbs().cwiseQuotient(limits.max_acceleration).maxCoeff());
     }
   }
-  std::printf("picker, belt %.0f mm/s, ALTER cycle %.0f ms%s: worst tool-to-part %.4f mm, "
-              "peak acceleration %.3f of the limit, %llu cycles held off the altered path\n",
-              belt_mm_s, cycle_s * 1e3, limited ? ", joint limits" : "", worst, peak,
-              static_cast<unsigned long long>(exec.limited_cycles()));
+  std::printf(
+      "picker, belt %.0f mm/s, ALTER cycle %.0f ms%s: worst tool-to-part %.4f mm, "
+      "peak acceleration %.3f of the limit, %llu cycles held off the altered path\n",
+      belt_mm_s, cycle_s * 1e3, limited ? ", joint limits" : "", worst, peak,
+      static_cast<unsigned long long>(exec.limited_cycles()));
   return {.worst_mm = worst, .peak_accel = peak, .held_off = exec.limited_cycles()};
 }
 
@@ -464,7 +465,8 @@ struct BeltCase {
     const kinematics::RobotModel& model = planner.model();
     const trajectory::JointLimits limits = joint_limits(model);
     trajectory::TrajectoryExecutor exec(forward_fn(model), inverse_fn(model), limits);
-    exec.load(meet.plan.trajectory, target.start_s, true, {.cumulative = false, .world_frame = true});
+    exec.load(meet.plan.trajectory, target.start_s, true,
+              {.cumulative = false, .world_frame = true});
     const double speed = target.velocity_mm_s.norm();
     const Eigen::Vector3d dir = target.velocity_mm_s / speed;
     const trajectory::MeetingRamp ramp{meet.ramp_mm};
@@ -488,15 +490,15 @@ struct BeltCase {
       exec.step(t, sample);
       path.push_back(sample.q);
       if (t >= on_part_s) {
-        const Eigen::Vector3d part =
-            target.at_stamp.translation() + target.velocity_mm_s * t;
+        const Eigen::Vector3d part = target.at_stamp.translation() + target.velocity_mm_s * t;
         out.worst_on_part =
             std::max(out.worst_on_part, (model.forward(sample.q)->translation() - part).norm());
       }
     }
     for (std::size_t k = 2; k < path.size(); ++k) {
       const trajectory::JointVector a = (path[k] - 2 * path[k - 1] + path[k - 2]) / 1e-6;
-      out.peak_accel = std::max(out.peak_accel, a.cwiseAbs().cwiseQuotient(limits.max_acceleration).maxCoeff());
+      out.peak_accel =
+          std::max(out.peak_accel, a.cwiseAbs().cwiseQuotient(limits.max_acceleration).maxCoeff());
     }
     out.held_off = exec.limited_cycles();
     return out;
@@ -547,13 +549,13 @@ TEST(PlannerIntercept, MeetsABeltPartAtTheEarliestPointItCanReachInTime) {
         const BeltCase::Followed f = cell.follow(target, *meet);
         EXPECT_LE(f.peak_accel, 1.01);
         EXPECT_LT(f.worst_on_part, 0.1);
-        std::printf("%4.0f mm/s, %s, yaw %+5.1f deg: waits at y = %6.1f mm, %.3f s after the "
-                    "exposure, ramp %.1f mm; on the part within %.3f mm, peak acceleration "
-                    "%.3f of the limit, %llu cycles held off; %d candidates, %.2f ms\n",
-                    speed, joint ? "joint" : "line ", yaw * 180 / std::numbers::pi,
-                    meet->meet.translation().y(), meet->meet_s, meet->ramp_mm, f.worst_on_part,
-                    f.peak_accel, static_cast<unsigned long long>(f.held_off), meet->candidates,
-                    ms);
+        std::printf(
+            "%4.0f mm/s, %s, yaw %+5.1f deg: waits at y = %6.1f mm, %.3f s after the "
+            "exposure, ramp %.1f mm; on the part within %.3f mm, peak acceleration "
+            "%.3f of the limit, %llu cycles held off; %d candidates, %.2f ms\n",
+            speed, joint ? "joint" : "line ", yaw * 180 / std::numbers::pi,
+            meet->meet.translation().y(), meet->meet_s, meet->ramp_mm, f.worst_on_part,
+            f.peak_accel, static_cast<unsigned long long>(f.held_off), meet->candidates, ms);
       }
     }
   }

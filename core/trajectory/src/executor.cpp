@@ -150,7 +150,8 @@ ExecState TrajectoryExecutor::step(double now_s, JointSample& out) {
       // The altered path (or a path the setpoints have not yet joined), through the limits.
       const bool held_off = limiter_.step(out.q, out.qd, dt);
       if (held_off) {  // how far the tool is off the path there
-        const double lag = (forward_(limiter_.q()).translation() - forward_(out.q).translation()).norm();
+        const double lag =
+            (forward_(limiter_.q()).translation() - forward_(out.q).translation()).norm();
         max_lag_mm_ = std::max(max_lag_mm_, lag);
       }
       limiting_ = alter_enabled_ || held_off;

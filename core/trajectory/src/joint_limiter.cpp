@@ -63,7 +63,8 @@ JointVector JointLimiter::stopping_point(double dt_s) const {
   }
   for (Eigen::Index j = 0; j < q_.size(); ++j) {
     const double v = qd_[j];
-    out[j] += std::copysign(v * v / (2.0 * limits_.max_acceleration[j]) + std::abs(v) * dt_s / 2.0, v);
+    out[j] +=
+        std::copysign(v * v / (2.0 * limits_.max_acceleration[j]) + std::abs(v) * dt_s / 2.0, v);
   }
   return out;
 }

@@ -164,7 +164,10 @@ TEST(TrajectoryExecutor, RestsAtDestinationPlusTotalCorrection) {
 /// executor keeps the gantry's joint limits, the tracking ends with ALTOFF, and `peak_accel`
 /// gets the largest sampled acceleration over the whole path, ALTOFF's braking to rest included,
 /// as a fraction of the limit.
-double track_belt(double belt_mm_s, double cycle_s, bool rate_feed_forward, bool limited = false,
+double track_belt(double belt_mm_s,
+                  double cycle_s,
+                  bool rate_feed_forward,
+                  bool limited = false,
                   double* peak_accel = nullptr) {
   constexpr double kMmPerCount = 50.0 * std::numbers::pi / (1024 * 4);  // digest 002 T9: 0.03835
   testing::Gantry gantry(4000, 40000, 5000);
@@ -237,7 +240,8 @@ double track_belt(double belt_mm_s, double cycle_s, bool rate_feed_forward, bool
     double peak = 0;
     for (std::size_t k = 2; k < path.size(); ++k) {
       const JointVector accel = (path[k] - 2 * path[k - 1] + path[k - 2]) / 1e-6;
-      peak = std::max(peak, accel.cwiseAbs().cwiseQuotient(gantry.limits.max_acceleration).maxCoeff());
+      peak =
+          std::max(peak, accel.cwiseAbs().cwiseQuotient(gantry.limits.max_acceleration).maxCoeff());
     }
     if (peak_accel != nullptr) {
       *peak_accel = peak;

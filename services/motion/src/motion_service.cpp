@@ -271,10 +271,10 @@ Result<motion::Plan> MotionService::plan(const cell_motion_MotionRequest& reques
       if (!met) {
         return std::move(met).error();
       }
-      meeting = Meeting{met->meet,
-                        request.target_stamp_ns +
-                            static_cast<std::int64_t>(std::llround(met->meet_s * 1e9)),
-                        met->ramp_mm};
+      meeting = Meeting{
+          met->meet,
+          request.target_stamp_ns + static_cast<std::int64_t>(std::llround(met->meet_s * 1e9)),
+          met->ramp_mm};
       return std::move(met->plan);
     }
     default:

@@ -582,9 +582,9 @@ class ConveyorJob {
     // At the meeting point: wait for the part (ALTER then follows it), close the gripper,
     // keep tracking through the dwell.
     const auto meet_deadline =
-        Clock::now() + std::chrono::duration<double>(
-                           1.0 + 2.0 * kMeetMarginS +
-                           (speed > 1.0 ? (200.0 + 2.0 * ramp.length_mm) / speed : 0.0));
+        Clock::now() +
+        std::chrono::duration<double>(1.0 + 2.0 * kMeetMarginS +
+                                      (speed > 1.0 ? (200.0 + 2.0 * ramp.length_mm) / speed : 0.0));
     while (!part_met && Clock::now() < meet_deadline) {
       if (control_interrupted()) {
         stop_robot();

@@ -1,8 +1,7 @@
 #pragma once
 
-#include <cstdint>
-
 #include <Eigen/Geometry>
+#include <cstdint>
 
 #include "cell/common/result.hpp"
 #include "cell/trajectory/alter.hpp"
@@ -29,10 +28,10 @@ enum class ExecState : std::uint8_t {
 /// executor keeps the tool on destination + correction(t) (it tracks the moving part) until
 /// alter_off(). Each altered setpoint comes from IK seeded with the previous one.
 ///
-/// With joint limits (the robot file's speeds and accelerations: motion::joint_limits), the setpoints keep them on
-/// the whole path, sampled cycle by cycle (JointLimiter): an altered path is followed through
-/// the limiter, which lags where the corrections ask more than the arm can do (counted:
-/// limited_cycles()); ALTOFF brakes the arm from its tracking speed at its limits to rest
+/// With joint limits (the robot file's speeds and accelerations: motion::joint_limits), the
+/// setpoints keep them on the whole path, sampled cycle by cycle (JointLimiter): an altered path is
+/// followed through the limiter, which lags where the corrections ask more than the arm can do
+/// (counted: limited_cycles()); ALTOFF brakes the arm from its tracking speed at its limits to rest
 /// (kMoving until it rests) instead of holding it at once; a path loaded while the setpoints
 /// still move (a move that starts on a moving part) is joined with bounded acceleration. A
 /// planned path without ALTER keeps the limits by construction (the planners check them) and
