@@ -179,6 +179,7 @@ void Links::take_states() {
       v.trajectory_id = std::string(bus::str(s->trajectory_id));
       v.fault_text = std::string(bus::str(s->fault_text));
       v.stop_code = std::string(bus::str(s->stop_code));
+      v.stamp_ns = s->header.stamp_ns;
       v.received = Clock::now();
     }
   }

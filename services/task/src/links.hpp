@@ -53,6 +53,7 @@ struct RobotView {
   std::string trajectory_id;
   std::string fault_text;
   std::string stop_code;  ///< why STOPPED: "command", "supervisor_lost" (the gateway's own stop)
+  std::int64_t stamp_ns = 0;  ///< wall clock of the state (when the gateway read the joints)
   Clock::time_point received{};
 };
 
